@@ -1,0 +1,269 @@
+import subprocess
+import sys
+from dataclasses import replace
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+import torch.nn as nn
+
+import ppo_pgg_discrete as pgg
+from conftest import ROOT
+
+
+def small_args(tmp_path, **overrides) -> pgg.Args:
+    base = pgg.Args(total_timesteps=2048, checkpoint_interval=1024, output_dir=str(tmp_path), num_steps=64)
+    return replace(base, **overrides)
+
+
+def run(args: pgg.Args):
+    run_dir = pgg.prepare_run_dir(args)
+    pgg.train(args, run_dir)
+    return run_dir
+
+
+# --- the guided distribution ------------------------------------------------------------------
+
+
+class FixedLogits(nn.Module):
+    """An actor that returns given conditional logits for the batch rows and given null logits for
+    the last row (where guided_logits puts the null embedding): guidance arithmetic on any logits."""
+
+    def __init__(self, logits_cond, logits_null):
+        super().__init__()
+        self.register_buffer("logits", torch.cat([logits_cond, logits_null.unsqueeze(0)]))
+
+    def forward(self, x):
+        assert len(x) == len(self.logits)
+        return self.logits
+
+
+def FixedLogitsAgent(logits_cond, logits_null):
+    agent = pgg.Agent(obs_dim=1, n_actions=logits_cond.shape[-1])
+    agent.actor = FixedLogits(logits_cond, logits_null)
+    return agent
+
+
+@pytest.mark.parametrize("guidance", [0.0, 0.5, 1.0, 1.1, 2.0, 5.0])
+def test_guided_policy_is_normalised_product(guidance):
+    torch.manual_seed(0)
+    logits_cond, logits_null = torch.randn(16, 5, dtype=torch.float64), torch.randn(5, dtype=torch.float64)
+    agent = FixedLogitsAgent(logits_cond, logits_null).double()
+    guided = agent.guided_logits(torch.zeros(16, 1, dtype=torch.float64), guidance).softmax(-1)
+    unnormalised = logits_null.softmax(-1) ** (1 - guidance) * logits_cond.softmax(-1) ** guidance
+    expected = unnormalised / unnormalised.sum(-1, keepdim=True)
+    torch.testing.assert_close(guided, expected, rtol=1e-10, atol=1e-12)
+    if guidance == 1.0:
+        torch.testing.assert_close(guided, logits_cond.softmax(-1), rtol=0, atol=0)
+    if guidance == 0.0:
+        torch.testing.assert_close(guided, logits_null.softmax(-1).expand(16, 5), rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("guidance", [20.0, 100.0])
+def test_large_guidance_stays_finite(guidance):
+    torch.manual_seed(0)
+    agent = FixedLogitsAgent(10 * torch.randn(64, 3), 10 * torch.randn(3))
+    logp = agent.guided_logits(torch.zeros(64, 1), guidance).log_softmax(-1)
+    assert torch.isfinite(logp.exp()).all() and torch.allclose(logp.exp().sum(-1), torch.ones(64))
+    assert torch.isfinite(-(logp.exp() * logp.clamp_min(-1e30)).sum(-1)).all()
+
+
+def test_policy_gradient_identity_normaliser_vanishes():
+    """E_{a~pi_hat}[A ∇log pi_hat] = E_{a~pi_hat}[A (γ∇log pi_s + (1-γ)∇log pi_null)] when E[A]=0,
+    with exact expectations over the actions; and not without centring (the Z(s) term is real)."""
+    torch.manual_seed(0)
+    guidance = 1.7
+    agent = pgg.Agent(obs_dim=3, n_actions=4).double()
+    with torch.no_grad():
+        agent.null_obs.normal_()
+        agent.actor[-1].weight.mul_(100)  # leave the near-uniform initial regime
+    obs = torch.randn(1, 3, dtype=torch.float64)
+    params = list(agent.actor.parameters()) + [agent.null_obs]
+
+    def grads(advantage_fn):
+        logp_hat = agent.guided_logits(obs, guidance).log_softmax(-1)[0]
+        pi_hat = logp_hat.exp().detach()
+        advantages = advantage_fn(pi_hat)
+        lhs = torch.autograd.grad((pi_hat * advantages * logp_hat).sum(), params)
+        logits = agent.actor(torch.cat([obs, agent.null_obs.unsqueeze(0)]))
+        logp_cond, logp_null = logits[0].log_softmax(-1), logits[1].log_softmax(-1)
+        mixed = guidance * logp_cond + (1 - guidance) * logp_null
+        rhs = torch.autograd.grad((pi_hat * advantages * mixed).sum(), params)
+        return torch.cat([g.flatten() for g in lhs]), torch.cat([g.flatten() for g in rhs])
+
+    raw = torch.tensor([1.0, -2.0, 0.5, 3.0], dtype=torch.float64)
+    lhs, rhs = grads(lambda pi: raw - (pi * raw).sum())
+    torch.testing.assert_close(lhs, rhs, rtol=1e-9, atol=1e-12)
+    assert lhs.abs().max() > 1e-3
+    lhs, rhs = grads(lambda pi: raw)
+    assert (lhs - rhs).abs().max() > 1e-3
+
+
+# --- gradient into the null embedding -----------------------------------------------------------
+
+
+def null_grad_after_update(guidance, cond_dropout):
+    torch.manual_seed(0)
+    agent = pgg.Agent(obs_dim=4, n_actions=2)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=1e-3)
+    buf = pgg.Rollout.empty(32, 2, 4)
+    buf.obs.normal_()
+    buf.actions.random_(0, 2)
+    buf.logprobs.fill_(np.log(0.5))
+    args = pgg.Args(guidance=guidance, cond_dropout=cond_dropout, update_epochs=1, num_minibatches=1)
+    pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 2), torch.randn(32, 2), args)
+    return agent.null_obs.grad.clone(), agent.null_obs.detach().clone()
+
+
+def test_null_embedding_gets_exactly_zero_gradient_at_guidance_one():
+    grad, value = null_grad_after_update(1.0, 0.0)
+    assert torch.equal(grad, torch.zeros(4)) and torch.equal(value, torch.zeros(4))
+
+
+@pytest.mark.parametrize("guidance,cond_dropout", [(1.1, 0.0), (1.0, 0.3), (0.5, 0.0)])
+def test_null_embedding_learns_otherwise(guidance, cond_dropout):
+    grad, value = null_grad_after_update(guidance, cond_dropout)
+    assert grad.abs().sum() > 0 and value.abs().sum() > 0
+
+
+class VanillaAgent(pgg.Agent):
+    """CleanRL's agent: the same networks and initialisation, no null embedding."""
+
+    def __init__(self, obs_dim, n_actions):
+        super().__init__(obs_dim, n_actions)
+        del self.null_obs
+
+    def guided_logits(self, obs, guidance, drop_mask=None):
+        return self.actor(obs)
+
+
+def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
+    args = small_args(tmp_path, total_timesteps=4096, guidance=1.0, cond_dropout=0.0)
+    pgg_ckpt = torch.load(pgg.checkpoint_path(run(args), 4096), weights_only=True)
+    monkeypatch.setattr(pgg, "Agent", VanillaAgent)
+    monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
+    vanilla_ckpt = torch.load(pgg.checkpoint_path(run(replace(args, run_name="vanilla")), 4096), weights_only=True)
+    assert set(pgg_ckpt["model"]) - set(vanilla_ckpt["model"]) == {"null_obs"}
+    for key, value in vanilla_ckpt["model"].items():
+        assert torch.equal(pgg_ckpt["model"][key], value), key
+    assert torch.equal(pgg_ckpt["model"]["null_obs"], torch.zeros(4))
+
+
+# --- Gymnasium 1.x autoreset --------------------------------------------------------------------
+
+
+class CountdownEnv(gym.Env):
+    """Episodes of a fixed length; the observation is (episode index, step in episode)."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, length):
+        self.length, self.episode, self.t = length, -1, 0
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.episode, self.t = self.episode + 1, 0
+        return np.array([self.episode, 0], np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        obs = np.array([self.episode, self.t], np.float32)
+        return obs, float(self.t), self.t == self.length, False, {}
+
+
+def test_rollout_buffer_at_episode_boundaries(monkeypatch):
+    lengths = [3, 5]
+    monkeypatch.setattr(pgg, "make_env", lambda env_id: lambda: CountdownEnv(lengths.pop(0)))
+    envs = pgg.make_vector_env("unused", 2, seed=0)
+    obs, _ = envs.reset(seed=0)
+    buf = pgg.Rollout.empty(7, 2, 2)
+    episodes = []
+    with torch.inference_mode():
+        next_obs, next_done = pgg.collect_rollout(
+            pgg.Agent(2, 2), envs, torch.from_numpy(obs), torch.zeros(2), buf, 1.0, lambda r, l: episodes.append((r, l))
+        )
+    # env 0: episodes of 3 steps. Every stored obs is a pre-action state; a terminal obs never is.
+    assert buf.obs[:, 0].tolist() == [[0, 0], [0, 1], [0, 2], [1, 0], [1, 1], [1, 2], [2, 0]]
+    assert buf.dones[:, 0].tolist() == [0, 0, 0, 1, 0, 0, 1]
+    assert buf.rewards[:, 0].tolist() == [1, 2, 3, 1, 2, 3, 1]
+    assert buf.obs[:, 1].tolist() == [[0, 0], [0, 1], [0, 2], [0, 3], [0, 4], [1, 0], [1, 1]]
+    assert buf.dones[:, 1].tolist() == [0, 0, 0, 0, 0, 1, 0]
+    assert next_obs.tolist() == [[2, 1], [1, 2]] and next_done.tolist() == [0, 0]
+    assert sorted(episodes) == [(6.0, 3), (6.0, 3), (15.0, 5)]
+    # GAE must not bootstrap across a boundary: with zero values the advantage is the in-episode return.
+    buf.values.zero_()
+    advantages, _ = pgg.compute_gae(buf, torch.zeros(2), next_done, discount=1.0, gae_lambda=1.0)
+    assert advantages[:, 0].tolist()[:3] == [6, 5, 3] and advantages[:, 1].tolist()[:5] == [15, 14, 12, 9, 5]
+
+
+# --- checkpoints, determinism, learning ---------------------------------------------------------
+
+
+def test_checkpoints_round_trip_under_weights_only(tmp_path):
+    run_dir = run(small_args(tmp_path, guidance=1.1, total_timesteps=2500))
+    files = sorted(p.name for p in (run_dir / "checkpoints").iterdir())
+    assert files == ["step_000001024.pt", "step_000002048.pt", "step_000002500.pt"]
+    assert (run_dir / "args.json").exists() and list(run_dir.glob("events.out.tfevents.*"))
+    agent, ckpt = pgg.load_checkpoint(run_dir / "checkpoints" / "step_000002500.pt")
+    assert ckpt["global_step"] == 2560 and ckpt["step_mark"] == 2500 and ckpt["env_id"] == "CartPole-v1"
+    assert ckpt["args"]["guidance"] == 1.1 and ckpt["action_space"] == "discrete"
+    first, _ = pgg.load_checkpoint(run_dir / "checkpoints" / "step_000001024.pt")
+    assert not torch.equal(first.null_obs, agent.null_obs)
+    assert not list(run_dir.rglob("*.tmp"))
+
+
+def test_same_seed_same_result(tmp_path):
+    args = small_args(tmp_path, cond_dropout=0.1, guidance=1.1)
+    a = torch.load(pgg.checkpoint_path(run(args), 2048), weights_only=True)["model"]
+    b = torch.load(pgg.checkpoint_path(run(replace(args, run_name="again")), 2048), weights_only=True)["model"]
+    c = torch.load(pgg.checkpoint_path(run(replace(args, run_name="other", seed=2)), 2048), weights_only=True)["model"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    assert not all(torch.equal(a[k], c[k]) for k in a)
+
+
+def evaluate(agent, guidance, episodes=10, seed=1000):
+    env = gym.make("CartPole-v1")
+    returns = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=seed + episode)
+        done, total = False, 0.0
+        while not done:
+            with torch.no_grad():
+                logits = agent.guided_logits(torch.as_tensor(obs).unsqueeze(0), guidance)
+            obs, reward, terminated, truncated, _ = env.step(int(pgg.sample_categorical(logits)[0]))
+            total, done = total + reward, terminated or truncated
+        returns.append(total)
+    return float(np.mean(returns))
+
+
+def test_short_cartpole_run_learns(tmp_path):
+    run_dir = run(pgg.Args(total_timesteps=50_000, guidance=1.1, output_dir=str(tmp_path)))
+    agent, _ = pgg.load_checkpoint(pgg.checkpoint_path(run_dir, 50_000))
+    # A random policy scores about 22. A broken GAE or autoreset stays far below this.
+    assert evaluate(agent, 1.1) > 150
+
+
+# --- bad input ----------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "flags,message",
+    [
+        (["--env-id", "NoSuchEnv-v0"], "cannot make environment"),
+        (["--env-id", "Pendulum-v1"], "Box action space"),
+        (["--guidance", "nan"], "--guidance"),
+        (["--guidance", "-1"], "--guidance"),
+        (["--cond-dropout", "1.5"], "--cond-dropout"),
+        (["--checkpoint-interval", "0"], "--checkpoint-interval"),
+        (["--output-dir", "/proc/forbidden"], "cannot write the run directory"),
+    ],
+)
+def test_bad_input_exits_with_one_line(flags, message):
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags], capture_output=True, text=True, timeout=120
+    )
+    assert proc.returncode == 2
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and message in lines[0] and "Traceback" not in proc.stderr
