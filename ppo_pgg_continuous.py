@@ -1,0 +1,564 @@
+"""PPO with Policy Gradient Guidance (PGG) for continuous (Box) action spaces, e.g. MuJoCo.
+
+CleanRL's `ppo_continuous_action.py` plus one learnable *null embedding* that stands in for the
+(normalised) observation and gives the unconditional mean mu_null. The guided policy
+
+    pi_hat(a|s) ∝ N(a; mu_null, σ)^(1-guidance) · N(a; mu_s, σ)^guidance
+               = N(a; (1-guidance)·mu_null + guidance·mu_s, σ)          (shared σ, exactly)
+
+drives rollouts, the PPO ratio and the entropy. `guidance` is the PGG strength γ of the paper; the
+discount factor is `discount`, never "gamma". With --guidance 1 --cond-dropout 0 this script is exactly
+CleanRL's PPO, with one fix: the observation-normalisation statistics live inside the agent, so every
+checkpoint carries them and evaluates on the scale it was trained on (CleanRL issue 425).
+Lines that PGG adds to PPO are marked `# PGG`.
+
+    python ppo_pgg_continuous.py --env-id Hopper-v4 --guidance 1.1
+"""
+
+import json
+import math
+import os
+import random
+import shutil
+import sys
+import time
+from collections import deque
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+import torch.nn as nn
+import tyro
+from torch.utils.tensorboard import SummaryWriter
+
+CHECKPOINT_FORMAT_VERSION = 1
+LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+
+
+@dataclass
+class Args:
+    exp_name: str = "ppo_pgg"
+    """the name of this experiment, part of the run directory's name"""
+    seed: int = 1
+    """seed of the experiment (torch, numpy, random and the environments)"""
+    torch_deterministic: bool = True
+    """if toggled, `torch.use_deterministic_algorithms(True)`"""
+    torch_threads: int = 1
+    """torch intra-op threads; one thread is fastest for these small networks"""
+    track: bool = False
+    """if toggled, track the run with Weights and Biases (needs `pip install wandb`)"""
+    wandb_project_name: str = "pgg"
+    """the W&B project name"""
+    wandb_entity: str | None = None
+    """the W&B entity (team)"""
+    output_dir: str = "runs"
+    """directory under which the run directory is created"""
+    run_name: str | None = None
+    """run directory name; default `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
+
+    # Algorithm arguments (CleanRL's continuous PPO defaults)
+    env_id: str = "Hopper-v4"
+    """the id of a gymnasium environment with a Box action space"""
+    total_timesteps: int = 1_000_000
+    """total environment steps; training runs whole iterations until at least this many"""
+    learning_rate: float = 3e-4
+    """the learning rate of the optimizer"""
+    num_envs: int = 1
+    """the number of parallel environments"""
+    num_steps: int = 2048
+    """the number of steps per environment per rollout"""
+    anneal_lr: bool = True
+    """linearly anneal the learning rate to zero"""
+    discount: float = 0.99
+    """the discount factor (CleanRL's `gamma`; renamed so it cannot be confused with the guidance γ)"""
+    gae_lambda: float = 0.95
+    """the lambda of generalized advantage estimation"""
+    num_minibatches: int = 32
+    """the number of minibatches per epoch"""
+    update_epochs: int = 10
+    """the number of epochs over each rollout"""
+    norm_adv: bool = True
+    """normalize advantages per minibatch"""
+    clip_coef: float = 0.2
+    """the PPO surrogate clipping coefficient"""
+    clip_vloss: bool = True
+    """use a clipped value loss, as in the PPO paper"""
+    ent_coef: float = 0.0
+    """coefficient of the entropy bonus (of the guided policy)"""
+    vf_coef: float = 0.5
+    """coefficient of the value loss"""
+    max_grad_norm: float = 0.5
+    """the maximum norm for gradient clipping"""
+    target_kl: float | None = None
+    """stop the epochs early when the approximate KL exceeds this"""
+    obs_clip: float = 10.0
+    """normalised observations are clipped to [-obs_clip, obs_clip]"""
+    reward_clip: float = 10.0
+    """normalised rewards are clipped to [-reward_clip, reward_clip]"""
+
+    # PGG arguments
+    guidance: float = 1.0
+    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""
+    cond_dropout: float = 0.0
+    """probability that a sample's actor input is replaced by the null embedding during updates"""
+    checkpoint_interval: int = 200_000
+    """save a checkpoint at the first iteration boundary past each multiple of this many steps"""
+
+
+def check_args(args: Args) -> str | None:
+    """Returns a one-line description of what is wrong with `args`, or None."""
+    if not math.isfinite(args.guidance) or args.guidance < 0:
+        return f"--guidance must be a finite number >= 0, got {args.guidance}"
+    if not 0.0 <= args.cond_dropout <= 1.0:
+        return f"--cond-dropout must lie in [0, 1], got {args.cond_dropout}"
+    if args.checkpoint_interval <= 0:
+        return f"--checkpoint-interval must be positive, got {args.checkpoint_interval}"
+    if args.total_timesteps <= 0 or args.num_envs <= 0 or args.num_steps <= 0:
+        return "--total-timesteps, --num-envs and --num-steps must be positive"
+    if args.num_minibatches <= 0 or (args.num_envs * args.num_steps) % args.num_minibatches:
+        return f"--num-minibatches must divide num_envs * num_steps = {args.num_envs * args.num_steps}"
+    try:
+        env = gym.make(args.env_id)
+    except ImportError as e:
+        if args.env_id == "Pusher-v4":
+            return (
+                "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); "
+                "with a newer mujoco use Pusher-v5"
+            )
+        return f"cannot make environment {args.env_id!r}: {e}"
+    except gym.error.Error as e:
+        return f"cannot make environment {args.env_id!r}: {e}"
+    action_space = env.action_space
+    env.close()
+    if not isinstance(action_space, gym.spaces.Box):
+        return f"{args.env_id} has a {type(action_space).__name__} action space; this script needs Box (use ppo_pgg_discrete.py)"
+    return None
+
+
+def make_env(env_id: str):
+    def thunk():
+        return gym.wrappers.FlattenObservation(gym.make(env_id))
+
+    return thunk
+
+
+def make_vector_env(env_id: str, num_envs: int, seed: int, discount: float, reward_clip: float) -> gym.vector.VectorEnv:
+    """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE
+    below relies on). Episode statistics are recorded on raw rewards, before normalisation.
+    Observations come out raw: the agent normalises them itself (see RunningObsNorm)."""
+    envs = gym.vector.SyncVectorEnv(
+        [make_env(env_id) for _ in range(num_envs)], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
+    )
+    envs = gym.wrappers.vector.RecordEpisodeStatistics(envs)
+    envs = gym.wrappers.vector.ClipAction(envs)
+    envs = gym.wrappers.vector.NormalizeReward(envs, gamma=discount)
+    envs = gym.wrappers.vector.ClipReward(envs, -reward_clip, reward_clip)
+    envs.action_space.seed(seed)
+    return envs
+
+
+class RunningObsNorm(nn.Module):
+    """Running mean/variance of observations, as gymnasium's NormalizeObservation computes them, kept
+    as buffers so that they are saved in the state dict. Updated only by explicit `update` calls
+    (training rollouts); evaluation reads them frozen."""
+
+    def __init__(self, obs_dim: int, clip: float, epsilon: float = 1e-8):
+        super().__init__()
+        self.clip, self.epsilon = clip, epsilon
+        self.register_buffer("mean", torch.zeros(obs_dim, dtype=torch.float64))
+        self.register_buffer("var", torch.ones(obs_dim, dtype=torch.float64))
+        self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))
+
+    def update(self, batch: np.ndarray) -> None:
+        batch = torch.from_numpy(batch).double()
+        batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0, unbiased=False), batch.shape[0]
+        delta = batch_mean - self.mean
+        total = self.count + batch_count
+        self.mean += delta * batch_count / total
+        m2 = self.var * self.count + batch_var * batch_count + delta.square() * self.count * batch_count / total
+        self.var.copy_(m2 / total)
+        self.count.copy_(total)
+
+    def forward(self, raw_obs: np.ndarray | torch.Tensor) -> torch.Tensor:
+        normalised = (torch.as_tensor(raw_obs, dtype=torch.float64) - self.mean) / torch.sqrt(self.var + self.epsilon)
+        return normalised.clamp(-self.clip, self.clip).float()
+
+
+def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
+    torch.nn.init.orthogonal_(layer.weight, std)
+    torch.nn.init.constant_(layer.bias, bias_const)
+    return layer
+
+
+class Agent(nn.Module):
+    """Actor and critic work on normalised observations; `obs_norm(raw)` produces them."""
+
+    def __init__(self, obs_dim: int, action_dim: int, obs_clip: float = 10.0):
+        super().__init__()
+        self.critic = nn.Sequential(
+            layer_init(nn.Linear(obs_dim, 64)),
+            nn.Tanh(),
+            layer_init(nn.Linear(64, 64)),
+            nn.Tanh(),
+            layer_init(nn.Linear(64, 1), std=1.0),
+        )
+        self.actor_mean = nn.Sequential(
+            layer_init(nn.Linear(obs_dim, 64)),
+            nn.Tanh(),
+            layer_init(nn.Linear(64, 64)),
+            nn.Tanh(),
+            layer_init(nn.Linear(64, action_dim), std=0.01),
+        )
+        self.actor_logstd = nn.Parameter(torch.zeros(1, action_dim))
+        self.obs_norm = RunningObsNorm(obs_dim, obs_clip)
+        # PGG: the null embedding, a normalised-observation-shaped input that means "no state".
+        # Initialised to zeros, the running mean observation: a neutral "average state" to start from,
+        # and it draws nothing from the RNG, so every other weight is initialised exactly as in
+        # vanilla PPO with the same seed.
+        self.null_obs = nn.Parameter(torch.zeros(obs_dim))
+
+    def get_value(self, obs: torch.Tensor) -> torch.Tensor:
+        return self.critic(obs).squeeze(-1)
+
+    def guided_mean(self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None) -> torch.Tensor:
+        """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations.
+        `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
+        # PGG: the null embedding rides along as one extra row, so the unconditional branch costs
+        # one row of the batch rather than a second pass through the actor.
+        means = self.actor_mean(torch.cat([obs, self.null_obs.unsqueeze(0)]))
+        mean_cond, mean_null = means[:-1], means[-1]
+        if drop_mask is not None:  # PGG
+            mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)
+        return (1.0 - guidance) * mean_null + guidance * mean_cond  # PGG
+
+
+def gaussian_log_prob(action, mean, logstd):
+    """log N(action; mean, exp(logstd)) summed over action dimensions."""
+    return (-0.5 * ((action - mean) * torch.exp(-logstd)).square() - logstd - LOG_SQRT_2PI).sum(-1)
+
+
+def gaussian_entropy(logstd):
+    return (0.5 + LOG_SQRT_2PI + logstd).sum(-1)
+
+
+@dataclass
+class Rollout:
+    obs: torch.Tensor  # (num_steps, num_envs, obs_dim), normalised with the statistics of that moment
+    actions: torch.Tensor  # (num_steps, num_envs, action_dim), before clipping to the action space
+    logprobs: torch.Tensor  # (num_steps, num_envs), log pi_hat(a|s) at collection time
+    rewards: torch.Tensor  # (num_steps, num_envs), normalised and clipped
+    dones: torch.Tensor  # (num_steps, num_envs): 1 where obs[t] is the first observation of an episode
+    values: torch.Tensor  # (num_steps, num_envs)
+
+    @classmethod
+    def empty(cls, num_steps: int, num_envs: int, obs_dim: int, action_dim: int) -> "Rollout":
+        zeros = lambda *shape: torch.zeros(shape)  # noqa: E731
+        return cls(
+            obs=zeros(num_steps, num_envs, obs_dim),
+            actions=zeros(num_steps, num_envs, action_dim),
+            logprobs=zeros(num_steps, num_envs),
+            rewards=zeros(num_steps, num_envs),
+            dones=zeros(num_steps, num_envs),
+            values=zeros(num_steps, num_envs),
+        )
+
+
+def collect_rollout(agent, envs, raw_obs, next_done, buf: Rollout, guidance: float, on_episode):
+    """Fills `buf` with num_steps transitions from the guided policy, updating the observation
+    statistics as it goes, and returns the (raw obs, done) to start the next rollout from.
+    `on_episode(return, length)` is called per finished episode with raw (unnormalised) returns."""
+    std = agent.actor_logstd.exp()
+    for step in range(buf.obs.shape[0]):
+        agent.obs_norm.update(raw_obs)
+        next_obs = agent.obs_norm(raw_obs)
+        buf.obs[step] = next_obs
+        buf.dones[step] = next_done
+        mean = agent.guided_mean(next_obs, guidance)  # PGG: act with pi_hat
+        action = mean + std * torch.randn_like(mean)
+        buf.actions[step] = action
+        buf.logprobs[step] = gaussian_log_prob(action, mean, agent.actor_logstd)
+        buf.values[step] = agent.get_value(next_obs)
+
+        raw_obs, reward, terminations, truncations, infos = envs.step(action.numpy())
+        # Truncation ends the episode without bootstrapping, as in CleanRL's PPO.
+        next_done = torch.from_numpy(np.logical_or(terminations, truncations).astype(np.float32))
+        buf.rewards[step] = torch.from_numpy(reward.astype(np.float32, copy=False))
+        if "episode" in infos:
+            for i in np.flatnonzero(infos["_episode"]):
+                on_episode(float(infos["episode"]["r"][i]), int(infos["episode"]["l"][i]))
+    return raw_obs, next_done
+
+
+def compute_gae(buf: Rollout, next_value, next_done, discount: float, gae_lambda: float):
+    """Generalized advantage estimation; returns (advantages, returns), each (num_steps, num_envs)."""
+    num_steps = buf.rewards.shape[0]
+    advantages = torch.zeros_like(buf.rewards)
+    lastgaelam = torch.zeros_like(next_value)
+    for t in reversed(range(num_steps)):
+        if t == num_steps - 1:
+            nextnonterminal, nextvalues = 1.0 - next_done, next_value
+        else:
+            nextnonterminal, nextvalues = 1.0 - buf.dones[t + 1], buf.values[t + 1]
+        delta = buf.rewards[t] + discount * nextvalues * nextnonterminal - buf.values[t]
+        lastgaelam = delta + discount * gae_lambda * nextnonterminal * lastgaelam
+        advantages[t] = lastgaelam
+    return advantages, advantages + buf.values
+
+
+def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args) -> dict[str, float]:
+    """PPO's clipped-objective epochs over one rollout, with pi_hat in place of pi."""
+    b_obs = buf.obs.reshape(-1, buf.obs.shape[-1])
+    b_actions = buf.actions.reshape(-1, buf.actions.shape[-1])
+    b_logprobs = buf.logprobs.reshape(-1)
+    b_advantages = advantages.reshape(-1)
+    b_returns = returns.reshape(-1)
+    b_values = buf.values.reshape(-1)
+    batch_size = b_obs.shape[0]
+    minibatch_size = batch_size // args.num_minibatches
+
+    clipfracs = []
+    for _ in range(args.update_epochs):
+        b_inds = torch.randperm(batch_size)
+        for start in range(0, batch_size, minibatch_size):
+            mb_inds = b_inds[start : start + minibatch_size]
+            mb_obs = b_obs[mb_inds]
+            drop_mask = None
+            if args.cond_dropout > 0:  # PGG: conditioning dropout
+                drop_mask = torch.rand(minibatch_size) < args.cond_dropout
+            mean = agent.guided_mean(mb_obs, args.guidance, drop_mask)  # PGG
+            newlogprob = gaussian_log_prob(b_actions[mb_inds], mean, agent.actor_logstd)
+            entropy = gaussian_entropy(agent.actor_logstd)
+            newvalue = agent.get_value(mb_obs)
+            logratio = newlogprob - b_logprobs[mb_inds]
+            ratio = logratio.exp()
+
+            with torch.no_grad():
+                # http://joschu.net/blog/kl-approx.html
+                old_approx_kl = (-logratio).mean()
+                approx_kl = ((ratio - 1) - logratio).mean()
+                clipfracs.append(((ratio - 1.0).abs() > args.clip_coef).float().mean().item())
+
+            mb_advantages = b_advantages[mb_inds]
+            if args.norm_adv:
+                mb_advantages = (mb_advantages - mb_advantages.mean()) / (mb_advantages.std() + 1e-8)
+
+            pg_loss1 = -mb_advantages * ratio
+            pg_loss2 = -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
+            pg_loss = torch.max(pg_loss1, pg_loss2).mean()
+
+            if args.clip_vloss:
+                v_loss_unclipped = (newvalue - b_returns[mb_inds]) ** 2
+                v_clipped = b_values[mb_inds] + torch.clamp(
+                    newvalue - b_values[mb_inds], -args.clip_coef, args.clip_coef
+                )
+                v_loss_clipped = (v_clipped - b_returns[mb_inds]) ** 2
+                v_loss = 0.5 * torch.max(v_loss_unclipped, v_loss_clipped).mean()
+            else:
+                v_loss = 0.5 * ((newvalue - b_returns[mb_inds]) ** 2).mean()
+
+            entropy_loss = entropy.mean()
+            loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+
+            optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            optimizer.step()
+
+        if args.target_kl is not None and approx_kl > args.target_kl:
+            break
+
+    y_pred, y_true = b_values.numpy(), b_returns.numpy()
+    var_y = np.var(y_true)
+    return {
+        "losses/value_loss": v_loss.item(),
+        "losses/policy_loss": pg_loss.item(),
+        "losses/entropy": entropy_loss.item(),
+        "losses/old_approx_kl": old_approx_kl.item(),
+        "losses/approx_kl": approx_kl.item(),
+        "losses/clipfrac": float(np.mean(clipfracs)),
+        "losses/explained_variance": float("nan") if var_y == 0 else float(1 - np.var(y_true - y_pred) / var_y),
+    }
+
+
+@torch.no_grad()
+def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:
+    """PGG: how far guidance moves the policy, and what the unconditional branch has learned.
+    With a shared σ, KL(pi_hat || pi_s) = ½ Σ ((mu_hat - mu_s)/σ)²."""
+    mean_guided = agent.guided_mean(obs, guidance)
+    mean_cond = agent.actor_mean(obs)
+    inv_std = torch.exp(-agent.actor_logstd)
+    return {
+        "pgg/kl_guided_vs_conditional": (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1)).mean().item(),
+        "pgg/unconditional_mean_norm": agent.actor_mean(agent.null_obs.unsqueeze(0)).norm().item(),
+        "pgg/null_embedding_norm": agent.null_obs.norm().item(),
+        "charts/action_std_mean": agent.actor_logstd.exp().mean().item(),
+    }
+
+
+def checkpoint_marks(total_timesteps: int, interval: int) -> list[int]:
+    """Nominal steps that get a checkpoint: every multiple of `interval` below the total, and the total."""
+    return list(range(interval, total_timesteps, interval)) + [total_timesteps]
+
+
+def checkpoint_path(run_dir: Path, mark: int) -> Path:
+    return run_dir / "checkpoints" / f"step_{mark:09d}.pt"
+
+
+def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark: int, envs) -> None:
+    """Self-contained, pickle-free checkpoint (loads with weights_only=True), written atomically.
+    The model's state dict includes the observation-normalisation statistics."""
+    action_space = envs.single_action_space
+    payload = {
+        "format_version": CHECKPOINT_FORMAT_VERSION,
+        "script": "ppo_pgg_continuous",
+        "action_space": "continuous",
+        "env_id": args.env_id,
+        "obs_dim": int(envs.single_observation_space.shape[0]),
+        "action_dim": int(action_space.shape[0]),
+        "action_low": action_space.low.tolist(),
+        "action_high": action_space.high.tolist(),
+        "global_step": int(global_step),
+        "step_mark": int(mark),
+        "args": asdict(args),
+        "model": agent.state_dict(),
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(payload, tmp)
+    os.replace(tmp, path)
+
+
+def load_checkpoint(path) -> tuple[Agent, dict]:
+    """Rebuilds the agent, normalisation statistics included, from a checkpoint file; returns
+    (agent in eval mode, the checkpoint dict)."""
+    ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    if ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION or ckpt.get("action_space") != "continuous":
+        raise ValueError(f"{path} is not a continuous PGG checkpoint of format {CHECKPOINT_FORMAT_VERSION}")
+    agent = Agent(ckpt["obs_dim"], ckpt["action_dim"], ckpt["args"]["obs_clip"])
+    agent.load_state_dict(ckpt["model"])
+    return agent.eval(), ckpt
+
+
+def default_run_name(args: Args) -> str:
+    return f"{args.env_id}__{args.exp_name}__g{args.guidance:g}__p{args.cond_dropout:g}__s{args.seed}"
+
+
+def prepare_run_dir(args: Args) -> Path:
+    """Creates the run directory, clearing what an earlier run of the same name left (a rerun starts
+    cleanly), and writes args.json. Raises OSError if it is not writable."""
+    run_dir = Path(args.output_dir) / (args.run_name or default_run_name(args))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
+    for stale in run_dir.glob("events.out.tfevents.*"):
+        stale.unlink()
+    tmp = run_dir / "args.json.tmp"
+    tmp.write_text(json.dumps(asdict(args), indent=2))
+    os.replace(tmp, run_dir / "args.json")
+    return run_dir
+
+
+def train(args: Args, run_dir: Path) -> None:
+    """Trains one agent, writing TensorBoard events and checkpoints into `run_dir`."""
+    if args.track:
+        import wandb
+
+        wandb.init(
+            project=args.wandb_project_name,
+            entity=args.wandb_entity,
+            sync_tensorboard=True,
+            config=asdict(args),
+            name=run_dir.name,
+            save_code=True,
+        )
+    writer = SummaryWriter(str(run_dir))
+    writer.add_text(
+        "hyperparameters",
+        "|param|value|\n|-|-|\n%s" % "\n".join(f"|{key}|{value}|" for key, value in asdict(args).items()),
+    )
+
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    torch.use_deterministic_algorithms(args.torch_deterministic)
+    torch.set_num_threads(args.torch_threads)
+
+    envs = make_vector_env(args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip)
+    obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
+    agent = Agent(obs_dim, action_dim, args.obs_clip)
+    # fused: one kernel for all parameters; CleanRL's per-tensor Adam costs more than our forward pass.
+    optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, fused=True)
+
+    batch_size = args.num_envs * args.num_steps
+    # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
+    num_iterations = -(-args.total_timesteps // batch_size)
+    marks = deque(checkpoint_marks(args.total_timesteps, args.checkpoint_interval))
+    buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim, action_dim)
+    recent_returns = deque(maxlen=20)
+    global_step = 0
+
+    def on_episode(episodic_return: float, episodic_length: int):
+        recent_returns.append(episodic_return)
+        writer.add_scalar("charts/episodic_return", episodic_return, global_step)
+        writer.add_scalar("charts/episodic_length", episodic_length, global_step)
+
+    start_time = time.time()
+    raw_obs, _ = envs.reset(seed=args.seed)
+    next_done = torch.zeros(args.num_envs)
+
+    for iteration in range(1, num_iterations + 1):
+        if args.anneal_lr:
+            optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
+
+        with torch.inference_mode():
+            raw_obs, next_done = collect_rollout(agent, envs, raw_obs, next_done, buf, args.guidance, on_episode)
+            global_step += batch_size
+            # Bootstrap from the next observation normalised like the ones it follows; the next
+            # rollout's first step updates the statistics with it.
+            next_value = agent.get_value(agent.obs_norm(raw_obs))
+            advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
+
+        stats = ppo_update(agent, optimizer, buf, advantages, returns, args)
+        stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))
+        stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
+        sps = int(global_step / (time.time() - start_time))
+        stats["charts/SPS"] = sps
+        for key, value in stats.items():
+            writer.add_scalar(key, value, global_step)
+
+        while marks and global_step >= marks[0]:
+            mark = marks.popleft()
+            save_checkpoint(checkpoint_path(run_dir, mark), agent, args, global_step, mark, envs)
+            mean_return = np.mean(recent_returns) if recent_returns else float("nan")
+            print(f"global_step={global_step} mark={mark} mean_return(last 20)={mean_return:.1f} SPS={sps}", flush=True)
+
+    envs.close()
+    writer.close()
+    if args.track:
+        wandb.finish()
+
+
+def main() -> None:
+    args = tyro.cli(Args)
+    error = check_args(args)
+    if error is None:
+        try:
+            run_dir = prepare_run_dir(args)
+        except OSError as e:
+            error = f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
+    if error is None and args.track:
+        try:
+            import wandb  # noqa: F401
+        except ImportError:
+            error = "--track needs Weights and Biases: pip install wandb"
+    if error is not None:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
+    print(f"run directory: {run_dir}")
+    train(args, run_dir)
+
+
+if __name__ == "__main__":
+    main()
