@@ -222,16 +222,28 @@ class Agent(nn.Module):
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
 
+    def unconditional_mean(self) -> torch.Tensor:
+        """PGG: mean of pi(.|null), shape (action_dim,); one actor pass whatever the batch size."""
+        return self.actor_mean(self.null_obs.unsqueeze(0))[0]
+
     def guided_mean(self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None) -> torch.Tensor:
         """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations.
         `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
-        # PGG: the null embedding rides along as one extra row, so the unconditional branch costs
-        # one row of the batch rather than a second pass through the actor.
-        means = self.actor_mean(torch.cat([obs, self.null_obs.unsqueeze(0)]))
-        mean_cond, mean_null = means[:-1], means[-1]
+        mean_cond = self.actor_mean(obs)
+        if guidance == 1.0 and drop_mask is None:
+            # pi_hat = pi exactly. Leaving the branch out of the graph leaves the null embedding with
+            # no gradient at all, so gradient clipping and Adam see exactly vanilla PPO's parameters
+            # (an all-zero gradient still regroups clip_grad_norm_'s sum and moves it by an ulp).
+            return mean_cond
+        mean_null = self.unconditional_mean()  # PGG
         if drop_mask is not None:  # PGG
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)
-        return (1.0 - guidance) * mean_null + guidance * mean_cond  # PGG
+        return guide(mean_cond, mean_null, guidance)
+
+
+def guide(cond: torch.Tensor, null: torch.Tensor, guidance: float) -> torch.Tensor:
+    """PGG: (1-γ)·null + γ·cond; exactly `cond` at γ=1."""
+    return (1.0 - guidance) * null + guidance * cond
 
 
 def gaussian_log_prob(action, mean, logstd):
@@ -270,12 +282,13 @@ def collect_rollout(agent, envs, raw_obs, next_done, buf: Rollout, guidance: flo
     statistics as it goes, and returns the (raw obs, done) to start the next rollout from.
     `on_episode(return, length)` is called per finished episode with raw (unnormalised) returns."""
     std = agent.actor_logstd.exp()
+    mean_null = agent.unconditional_mean()  # PGG: the weights, hence pi(.|null), are fixed here
     for step in range(buf.obs.shape[0]):
         agent.obs_norm.update(raw_obs)
         next_obs = agent.obs_norm(raw_obs)
         buf.obs[step] = next_obs
         buf.dones[step] = next_done
-        mean = agent.guided_mean(next_obs, guidance)  # PGG: act with pi_hat
+        mean = guide(agent.actor_mean(next_obs), mean_null, guidance)  # PGG: act with pi_hat
         action = mean + std * torch.randn_like(mean)
         buf.actions[step] = action
         buf.logprobs[step] = gaussian_log_prob(action, mean, agent.actor_logstd)
@@ -391,7 +404,7 @@ def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> di
     inv_std = torch.exp(-agent.actor_logstd)
     return {
         "pgg/kl_guided_vs_conditional": (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1)).mean().item(),
-        "pgg/unconditional_mean_norm": agent.actor_mean(agent.null_obs.unsqueeze(0)).norm().item(),
+        "pgg/unconditional_mean_norm": agent.unconditional_mean().norm().item(),
         "pgg/null_embedding_norm": agent.null_obs.norm().item(),
         "charts/action_std_mean": agent.actor_logstd.exp().mean().item(),
     }

@@ -173,18 +173,30 @@ class Agent(nn.Module):
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
 
+    def unconditional_logits(self) -> torch.Tensor:
+        """PGG: logits of pi(.|null), shape (n_actions,); one actor pass whatever the batch size."""
+        return self.actor(self.null_obs.unsqueeze(0))[0]
+
     def guided_logits(
         self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None
     ) -> torch.Tensor:
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
         replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
-        # PGG: the null embedding rides along as one extra row, so the unconditional branch costs
-        # one row of the batch rather than a second pass through the actor.
-        logits = self.actor(torch.cat([obs, self.null_obs.unsqueeze(0)]))
-        logits_cond, logits_null = logits[:-1], logits[-1]
+        logits_cond = self.actor(obs)
+        if guidance == 1.0 and drop_mask is None:
+            # pi_hat = pi exactly. Leaving the branch out of the graph leaves the null embedding with
+            # no gradient at all, so gradient clipping and Adam see exactly vanilla PPO's parameters
+            # (an all-zero gradient still regroups clip_grad_norm_'s sum and moves it by an ulp).
+            return logits_cond
+        logits_null = self.unconditional_logits()  # PGG
         if drop_mask is not None:  # PGG
             logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)
-        return (1.0 - guidance) * logits_null + guidance * logits_cond  # PGG
+        return guide(logits_cond, logits_null, guidance)
+
+
+def guide(cond: torch.Tensor, null: torch.Tensor, guidance: float) -> torch.Tensor:
+    """PGG: (1-γ)·null + γ·cond; exactly `cond` at γ=1."""
+    return (1.0 - guidance) * null + guidance * cond
 
 
 def sample_categorical(logits: torch.Tensor) -> torch.Tensor:
@@ -217,10 +229,11 @@ class Rollout:
 def collect_rollout(agent, envs, next_obs, next_done, buf: Rollout, guidance: float, on_episode):
     """Fills `buf` with num_steps transitions from the guided policy and returns the (obs, done)
     to start the next rollout from. `on_episode(return, length)` is called per finished episode."""
+    logits_null = agent.unconditional_logits()  # PGG: the weights, hence pi(.|null), are fixed here
     for step in range(buf.obs.shape[0]):
         buf.obs[step] = next_obs
         buf.dones[step] = next_done
-        logits = agent.guided_logits(next_obs, guidance)  # PGG: act with pi_hat
+        logits = guide(agent.actor(next_obs), logits_null, guidance)  # PGG: act with pi_hat
         action = sample_categorical(logits)
         buf.actions[step] = action
         buf.logprobs[step] = logits.log_softmax(-1).gather(-1, action.unsqueeze(-1)).squeeze(-1)
@@ -333,7 +346,7 @@ def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> di
     """PGG: how far guidance moves the policy, and what the unconditional branch has learned."""
     logp_guided = agent.guided_logits(obs, guidance).log_softmax(-1)
     logp_cond = agent.actor(obs).log_softmax(-1)
-    logp_null = agent.actor(agent.null_obs.unsqueeze(0)).log_softmax(-1)
+    logp_null = agent.unconditional_logits().log_softmax(-1)
     return {
         "pgg/kl_guided_vs_conditional": (logp_guided.exp() * (logp_guided - logp_cond)).sum(-1).mean().item(),
         "pgg/entropy_unconditional": -(logp_null.exp() * logp_null).sum().item(),

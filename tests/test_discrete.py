@@ -27,16 +27,16 @@ def run(args: pgg.Args):
 
 
 class FixedLogits(nn.Module):
-    """An actor that returns given conditional logits for the batch rows and given null logits for
-    the last row (where guided_logits puts the null embedding): guidance arithmetic on any logits."""
+    """An actor that returns given null logits for the (one-row) null embedding and given
+    conditional logits for a batch: guidance arithmetic on arbitrary logits."""
 
     def __init__(self, logits_cond, logits_null):
         super().__init__()
-        self.register_buffer("logits", torch.cat([logits_cond, logits_null.unsqueeze(0)]))
+        self.register_buffer("cond", logits_cond)
+        self.register_buffer("null", logits_null.unsqueeze(0))
 
     def forward(self, x):
-        assert len(x) == len(self.logits)
-        return self.logits
+        return self.null if len(x) == 1 else self.cond
 
 
 def FixedLogitsAgent(logits_cond, logits_null):
@@ -86,8 +86,8 @@ def test_policy_gradient_identity_normaliser_vanishes():
         pi_hat = logp_hat.exp().detach()
         advantages = advantage_fn(pi_hat)
         lhs = torch.autograd.grad((pi_hat * advantages * logp_hat).sum(), params)
-        logits = agent.actor(torch.cat([obs, agent.null_obs.unsqueeze(0)]))
-        logp_cond, logp_null = logits[0].log_softmax(-1), logits[1].log_softmax(-1)
+        logp_cond = agent.actor(obs)[0].log_softmax(-1)
+        logp_null = agent.unconditional_logits().log_softmax(-1)
         mixed = guidance * logp_cond + (1 - guidance) * logp_null
         rhs = torch.autograd.grad((pi_hat * advantages * mixed).sum(), params)
         return torch.cat([g.flatten() for g in lhs]), torch.cat([g.flatten() for g in rhs])
@@ -113,12 +113,13 @@ def null_grad_after_update(guidance, cond_dropout):
     buf.logprobs.fill_(np.log(0.5))
     args = pgg.Args(guidance=guidance, cond_dropout=cond_dropout, update_epochs=1, num_minibatches=1)
     pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 2), torch.randn(32, 2), args)
-    return agent.null_obs.grad.clone(), agent.null_obs.detach().clone()
+    grad = agent.null_obs.grad
+    return (None if grad is None else grad.clone()), agent.null_obs.detach().clone()
 
 
-def test_null_embedding_gets_exactly_zero_gradient_at_guidance_one():
+def test_null_embedding_gets_no_gradient_at_guidance_one():
     grad, value = null_grad_after_update(1.0, 0.0)
-    assert torch.equal(grad, torch.zeros(4)) and torch.equal(value, torch.zeros(4))
+    assert grad is None and torch.equal(value, torch.zeros(4))
 
 
 @pytest.mark.parametrize("guidance,cond_dropout", [(1.1, 0.0), (1.0, 0.3), (0.5, 0.0)])
@@ -128,11 +129,14 @@ def test_null_embedding_learns_otherwise(guidance, cond_dropout):
 
 
 class VanillaAgent(pgg.Agent):
-    """CleanRL's agent: the same networks and initialisation, no null embedding."""
+    """CleanRL's agent: the same networks and initialisation, no null embedding, no guidance."""
 
     def __init__(self, obs_dim, n_actions):
         super().__init__(obs_dim, n_actions)
         del self.null_obs
+
+    def unconditional_logits(self):
+        return None
 
     def guided_logits(self, obs, guidance, drop_mask=None):
         return self.actor(obs)
@@ -142,6 +146,7 @@ def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
     args = small_args(tmp_path, total_timesteps=4096, guidance=1.0, cond_dropout=0.0)
     pgg_ckpt = torch.load(pgg.checkpoint_path(run(args), 4096), weights_only=True)
     monkeypatch.setattr(pgg, "Agent", VanillaAgent)
+    monkeypatch.setattr(pgg, "guide", lambda cond, null, guidance: cond)
     monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
     vanilla_ckpt = torch.load(pgg.checkpoint_path(run(replace(args, run_name="vanilla")), 4096), weights_only=True)
     assert set(pgg_ckpt["model"]) - set(vanilla_ckpt["model"]) == {"null_obs"}

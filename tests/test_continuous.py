@@ -1,0 +1,196 @@
+import json
+import subprocess
+import sys
+from dataclasses import replace
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import ppo_pgg_continuous as pgg
+from conftest import ROOT
+
+PAPER_TASKS = ["HalfCheetah-v4", "Hopper-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4"]
+
+
+def run(args: pgg.Args):
+    run_dir = pgg.prepare_run_dir(args)
+    pgg.train(args, run_dir)
+    return run_dir
+
+
+def small_args(tmp_path, **overrides) -> pgg.Args:
+    base = pgg.Args(
+        env_id="InvertedPendulum-v4", total_timesteps=1024, num_steps=512, num_minibatches=8, update_epochs=2,
+        checkpoint_interval=512, output_dir=str(tmp_path),
+    )  # fmt: skip
+    return replace(base, **overrides)
+
+
+@pytest.mark.parametrize("guidance", [0.0, 0.5, 1.0, 1.1, 1.5, 3.0])
+def test_guided_gaussian_is_normalised_product(guidance):
+    """N(mu_null, σ)^(1-γ) N(mu_s, σ)^γ, normalised numerically on a grid, equals N(mu_hat, σ)."""
+    torch.manual_seed(0)
+    agent = pgg.Agent(obs_dim=3, action_dim=1).double()
+    with torch.no_grad():
+        agent.actor_mean[-1].weight.mul_(100)
+        agent.null_obs.normal_()
+        agent.actor_logstd.fill_(-0.3)
+    obs = torch.randn(4, 3, dtype=torch.float64)
+    with torch.no_grad():
+        mean_hat = agent.guided_mean(obs, guidance)
+        mean_cond = agent.actor_mean(obs)
+        mean_null = agent.actor_mean(agent.null_obs.unsqueeze(0))
+    grid = torch.linspace(-15, 15, 30001, dtype=torch.float64).unsqueeze(-1)  # (G, 1) actions
+    logstd = agent.actor_logstd.detach()
+    for i in range(4):
+        log_unnormalised = (1 - guidance) * pgg.gaussian_log_prob(grid, mean_null, logstd) + guidance * (
+            pgg.gaussian_log_prob(grid, mean_cond[i], logstd)
+        )
+        density = log_unnormalised.exp()
+        density = density / torch.trapezoid(density, grid.squeeze(-1))
+        expected = pgg.gaussian_log_prob(grid, mean_hat[i], logstd).exp()
+        torch.testing.assert_close(density, expected, rtol=1e-6, atol=1e-9)
+    if guidance == 1.0:
+        assert torch.equal(mean_hat, mean_cond)
+    if guidance == 0.0:
+        assert torch.equal(mean_hat, mean_null.expand(4, 1))
+
+
+def null_grad(guidance, cond_dropout):
+    torch.manual_seed(0)
+    agent = pgg.Agent(obs_dim=4, action_dim=2)
+    optimizer = torch.optim.Adam(agent.parameters(), lr=1e-3)
+    buf = pgg.Rollout.empty(32, 1, 4, 2)
+    buf.obs.normal_()
+    buf.actions.normal_()
+    with torch.no_grad():
+        buf.logprobs.copy_(pgg.gaussian_log_prob(buf.actions, torch.zeros(2), agent.actor_logstd))
+    args = pgg.Args(guidance=guidance, cond_dropout=cond_dropout, update_epochs=1, num_minibatches=1)
+    pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 1), torch.randn(32, 1), args)
+    return agent.null_obs.grad
+
+
+def test_null_embedding_gradient_only_when_guidance_differs_from_one_or_dropout():
+    assert null_grad(1.0, 0.0) is None
+    assert null_grad(1.1, 0.0).abs().sum() > 0
+    assert null_grad(1.0, 0.3).abs().sum() > 0
+
+
+class VanillaAgent(pgg.Agent):
+    def __init__(self, obs_dim, action_dim, obs_clip=10.0):
+        super().__init__(obs_dim, action_dim, obs_clip)
+        del self.null_obs
+
+    def unconditional_mean(self):
+        return None
+
+    def guided_mean(self, obs, guidance, drop_mask=None):
+        return self.actor_mean(obs)
+
+
+def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
+    args = small_args(tmp_path)
+    ours = torch.load(pgg.checkpoint_path(run(args), 1024), weights_only=True)["model"]
+    monkeypatch.setattr(pgg, "Agent", VanillaAgent)
+    monkeypatch.setattr(pgg, "guide", lambda cond, null, guidance: cond)
+    monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
+    vanilla = torch.load(pgg.checkpoint_path(run(replace(args, run_name="vanilla")), 1024), weights_only=True)["model"]
+    assert set(ours) - set(vanilla) == {"null_obs"}
+    assert [k for k in vanilla if not torch.equal(ours[k], vanilla[k])] == []
+
+
+CHECK_IN_FRESH_PROCESS = """
+import json, sys, torch
+sys.path.insert(0, sys.argv[1])
+import ppo_pgg_continuous as pgg
+agent, _ = pgg.load_checkpoint(sys.argv[2])
+raw = torch.tensor(json.loads(sys.argv[3]), dtype=torch.float64)
+before = {k: v.clone() for k, v in agent.obs_norm.state_dict().items()}
+with torch.no_grad():
+    mean = agent.guided_mean(agent.obs_norm(raw), 1.1)
+assert all(torch.equal(v, agent.obs_norm.state_dict()[k]) for k, v in before.items())
+print(json.dumps(mean.double().tolist()))
+"""
+
+
+def test_checkpoint_carries_observation_statistics(tmp_path):
+    """A checkpoint alone maps a raw observation to the training-time action mean (cleanrl#425)."""
+    run_dir = run(small_args(tmp_path, guidance=1.1, env_id="Hopper-v4"))
+    agent, ckpt = pgg.load_checkpoint(pgg.checkpoint_path(run_dir, 1024))
+    assert ckpt["global_step"] == 1024 and ckpt["action_space"] == "continuous" and ckpt["env_id"] == "Hopper-v4"
+    assert float(agent.obs_norm.count) > 1000 and agent.obs_norm.mean.abs().sum() > 0
+    raw = np.random.default_rng(0).normal(size=(3, 11)) * 2 + 1
+    with torch.no_grad():
+        in_process = agent.guided_mean(agent.obs_norm(raw), 1.1)
+        unnormalised = agent.guided_mean(torch.as_tensor(raw, dtype=torch.float32).clamp(-10, 10), 1.1)
+    assert not torch.allclose(in_process, unnormalised, atol=1e-3)  # the statistics matter
+    out = subprocess.run(
+        [sys.executable, "-c", CHECK_IN_FRESH_PROCESS, str(ROOT), str(pgg.checkpoint_path(run_dir, 1024)),
+         json.dumps(raw.tolist())],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    assert torch.equal(torch.tensor(json.loads(out.stdout)).float(), in_process)
+
+
+def test_observation_statistics_match_gymnasium():
+    rng = np.random.default_rng(0)
+    norm = pgg.RunningObsNorm(3, clip=10.0)
+    reference = gym.wrappers.utils.RunningMeanStd(shape=(3,))
+    for _ in range(5):
+        batch = rng.normal(size=(7, 3)) * 5 + 2
+        norm.update(batch)
+        reference.update(batch)
+    np.testing.assert_allclose(norm.mean.numpy(), reference.mean, rtol=1e-12)
+    np.testing.assert_allclose(norm.var.numpy(), reference.var, rtol=1e-12)
+
+
+def test_short_inverted_pendulum_run_learns(tmp_path):
+    run_dir = run(pgg.Args(env_id="InvertedPendulum-v4", total_timesteps=30_000, guidance=1.1, output_dir=str(tmp_path)))
+    agent, _ = pgg.load_checkpoint(pgg.checkpoint_path(run_dir, 30_000))
+    env = gym.make("InvertedPendulum-v4")
+    returns = []
+    for episode in range(5):
+        obs, _ = env.reset(seed=1000 + episode)
+        done, total = False, 0.0
+        while not done:
+            with torch.no_grad():
+                action = agent.guided_mean(agent.obs_norm(obs[None]), 1.1)[0].numpy()
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total, done = total + reward, terminated or truncated
+        returns.append(total)
+    # A random policy balances for about 5 steps.
+    assert np.mean(returns) > 150
+
+
+@pytest.mark.parametrize("env_id", PAPER_TASKS)
+def test_paper_task_steps_through_env_factory(env_id):
+    if env_id == "Pusher-v4" and pgg.check_args(pgg.Args(env_id=env_id)) is not None:
+        pytest.skip("Pusher-v4 needs mujoco<3, which is not installed")
+    envs = pgg.make_vector_env(env_id, 2, seed=0, discount=0.99, reward_clip=10.0)
+    obs, _ = envs.reset(seed=0)
+    agent = pgg.Agent(obs.shape[1], envs.single_action_space.shape[0])
+    buf = pgg.Rollout.empty(300, 2, obs.shape[1], envs.single_action_space.shape[0])
+    with torch.inference_mode():
+        pgg.collect_rollout(agent, envs, obs, torch.zeros(2), buf, 1.1, lambda r, l: None)
+    assert torch.isfinite(buf.obs).all() and buf.rewards.abs().max() <= 10.0
+    assert float(agent.obs_norm.count) == pytest.approx(600, abs=1)
+
+
+@pytest.mark.parametrize(
+    "flags,message",
+    [
+        (["--env-id", "CartPole-v1"], "Discrete action space"),
+        (["--env-id", "Nope-v4"], "cannot make environment"),
+        (["--guidance", "inf"], "--guidance"),
+        (["--cond-dropout", "-0.1"], "--cond-dropout"),
+        (["--checkpoint-interval", "-5"], "--checkpoint-interval"),
+    ],
+)
+def test_bad_input_exits_with_one_line(flags, message):
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "ppo_pgg_continuous.py"), *flags], capture_output=True, text=True, timeout=120
+    )
+    lines = [line for line in proc.stderr.strip().splitlines() if "Warn" not in line and "deprecation" not in line]
+    assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr
