@@ -1,0 +1,150 @@
+"""Training and sweep throughput, measured in one run on one machine, with the ratios that matter.
+
+    python benchmarks/bench_speed.py                 # about 5 minutes on 2 cores
+    python benchmarks/bench_speed.py --repeats 1     # quicker, noisier
+
+Prints, for CartPole-v1 (discrete script) and Hopper-v4 (continuous script):
+  - raw env stepping: one gym.make env, and the training script's own vector env, random actions;
+  - training steps per second at guidance 1 (PPO) and 1.1 (PGG), and the PGG overhead;
+  - the γ sweep: env steps per second of the batched evaluator and of the one-env sequential
+    reference on the same cells, their ratio, and the batched rate against raw env stepping.
+Configurations alternate across repeats and each reports its best (least disturbed) repeat.
+CleanRL's reference figures on this machine class (2 cores, one thread per run, gymnasium 0.29,
+mujoco 2.3.7): ppo.py 3.4k-4.0k SPS on CartPole-v1, ppo_continuous_action.py about 780 SPS on Hopper-v4.
+"""
+
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import tyro
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import eval_gamma_sweep as sweep  # noqa: E402
+import ppo_pgg_continuous  # noqa: E402
+import ppo_pgg_discrete  # noqa: E402
+
+CLEANRL_SPS = {"CartPole-v1": (3400, 4000), "Hopper-v4": (780, 780)}
+
+
+@dataclass
+class Args:
+    repeats: int = 3
+    """alternating repeats of each training configuration; each reports its fastest"""
+    cartpole_steps: int = 40_960
+    """training steps per CartPole measurement"""
+    hopper_steps: int = 8_192
+    """training steps per Hopper measurement"""
+    sweep_episodes: int = 10
+    """episodes per γ in the sweep measurement"""
+
+
+def raw_env_rate(make, steps: int = 20_000) -> float:
+    env = make()
+    env.reset(seed=0)
+    env.action_space.seed(0)
+    actions = [env.action_space.sample() for _ in range(1000)]
+    start = time.perf_counter()
+    for i in range(steps):
+        _, _, terminated, truncated, _ = env.step(actions[i % 1000])
+        if terminated or truncated:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def vector_env_rate(envs, steps: int) -> float:
+    envs.reset(seed=0)
+    envs.action_space.seed(0)
+    start = time.perf_counter()
+    for _ in range(steps):
+        envs.step(envs.action_space.sample())
+    return steps * envs.num_envs / (time.perf_counter() - start)
+
+
+def training_sps(module, args) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        args.output_dir = tmp
+        run_dir = module.prepare_run_dir(args)
+        start = time.perf_counter()
+        module.train(args, run_dir)
+        elapsed = time.perf_counter() - start
+    iterations = -(-args.total_timesteps // (args.num_envs * args.num_steps))
+    return iterations * args.num_envs * args.num_steps / elapsed
+
+
+def trained_checkpoint(module, args, tmp: str) -> Path:
+    args.output_dir = tmp
+    module.train(args, module.prepare_run_dir(args))
+    return sorted(Path(tmp).rglob("step_*.pt"))[-1]
+
+
+def sweep_rates(checkpoint: Path, gammas, episodes: int) -> tuple[float, float]:
+    agent, ckpt = sweep.load_any_checkpoint(checkpoint)
+    policy = sweep.GuidedPolicy(agent, ckpt)
+    start = time.perf_counter()
+    _, _, steps = sweep.evaluate_batched(policy, ckpt, gammas, episodes, 10_000, False)
+    batched = steps / (time.perf_counter() - start)
+    start, sequential_steps = time.perf_counter(), 0
+    for gamma in gammas:
+        sequential_steps += int(sweep.evaluate_sequential(policy, ckpt, gamma, episodes, 10_000, False)[1].sum())
+    sequential = sequential_steps / (time.perf_counter() - start)
+    assert sequential_steps == steps  # the same episodes, step for step
+    return batched, sequential
+
+
+def main() -> None:
+    args = tyro.cli(Args)
+    torch.set_num_threads(1)
+    torch.use_deterministic_algorithms(True)  # its first call imports a lot; keep that out of the timings
+    rows = []
+
+    cartpole = lambda g: ppo_pgg_discrete.Args(env_id="CartPole-v1", total_timesteps=args.cartpole_steps, guidance=g)  # noqa: E731
+    hopper = lambda g: ppo_pgg_continuous.Args(env_id="Hopper-v4", total_timesteps=args.hopper_steps, guidance=g)  # noqa: E731
+    configs = [("CartPole-v1", ppo_pgg_discrete, cartpole), ("Hopper-v4", ppo_pgg_continuous, hopper)]
+    sps = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1)}
+    for _ in range(args.repeats):
+        for env_id, module, make_args in configs:
+            for guidance in (1.0, 1.1):
+                sps[(env_id, guidance)].append(training_sps(module, make_args(guidance)))
+
+    for env_id, module, make_args in configs:
+        single = raw_env_rate(module.make_env(env_id))
+        train_args = make_args(1.0)
+        if module is ppo_pgg_discrete:
+            vec = module.make_vector_env(env_id, train_args.num_envs, 0)
+        else:
+            vec = module.make_vector_env(env_id, train_args.num_envs, 0, train_args.discount, train_args.reward_clip)
+        vector = vector_env_rate(vec, 20_000 // train_args.num_envs)
+        ppo, pgg = max(sps[(env_id, 1.0)]), max(sps[(env_id, 1.1)])
+        low, high = CLEANRL_SPS[env_id]
+        with tempfile.TemporaryDirectory() as tmp:
+            quick = make_args(1.1)
+            quick.total_timesteps = 4 * quick.num_envs * quick.num_steps
+            checkpoint = trained_checkpoint(module, quick, tmp)
+            gammas = sweep.PAPER_GAMMAS["discrete" if module is ppo_pgg_discrete else "continuous"]
+            batched, sequential = sweep_rates(checkpoint, gammas, args.sweep_episodes)
+        rows += [
+            (env_id, "raw env, one gym.make env (steps/s)", f"{single:,.0f}"),
+            (env_id, f"raw env, training vector env of {train_args.num_envs} (steps/s)", f"{vector:,.0f}"),
+            (env_id, "training SPS, guidance 1.0 (PPO)", f"{ppo:,.0f}"),
+            (env_id, "training SPS, guidance 1.1 (PGG)", f"{pgg:,.0f}"),
+            (env_id, "PGG time overhead, 1 - SPS(1.1)/SPS(1.0)", f"{1 - pgg / ppo:+.1%}"),
+            (env_id, "training speed-up over CleanRL's reference SPS", f"{pgg / high:.2f}x - {pgg / low:.2f}x"),
+            (env_id, "training SPS / raw vector env rate", f"{pgg / vector:.2f}"),
+            (env_id, "sweep, batched evaluator (env steps/s)", f"{batched:,.0f}"),
+            (env_id, "sweep, sequential one-env reference (env steps/s)", f"{sequential:,.0f}"),
+            (env_id, "sweep speed-up, batched / sequential", f"{batched / sequential:.1f}x"),
+            (env_id, "sweep rate / raw one-env stepping rate", f"{batched / single:.2f}"),
+        ]
+    width = max(len(r[1]) for r in rows)
+    print(f"torch {torch.__version__}, numpy {np.__version__}, {args.repeats} repeat(s)")
+    for env_id, what, value in rows:
+        print(f"{env_id:12s} {what:{width}s} {value}")
+
+
+if __name__ == "__main__":
+    main()
