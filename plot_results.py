@@ -212,6 +212,16 @@ def steps_formatter(x, _pos) -> str:
     return f"{x / 1e6:g}M" if x >= 1e6 else f"{x / 1e3:g}K"
 
 
+def style_axis(ax, title: str, xlabel: str, ylabel: str, steps_on_x: bool) -> None:
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel(xlabel, fontsize=8)
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.3)
+    if steps_on_x:
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
+
+
 def shared_legend(fig, ax) -> None:
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, frameon=False,
@@ -235,12 +245,7 @@ def figure_for_variant(summary, envs, variant):
             if all(series):
                 plot_series(ax, steps, series, color=colour, linestyle="--", marker="o", markersize=2.5,
                             label=f"γ={gamma:g}")  # fmt: skip
-        ax.set_title(env, fontsize=9)
-        ax.set_xlabel("training steps", fontsize=8)
-        ax.set_ylabel("return", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
-        ax.grid(alpha=0.3)
+        style_axis(ax, env, "training steps", "return", steps_on_x=True)
     fig.suptitle(f"{variant} checkpoints, eval guidance swept", fontsize=9)
     fig.tight_layout()
     shared_legend(fig, axes[0])
@@ -259,11 +264,7 @@ def gamma_response(summary, envs, step):
                 plot_series(ax, [float(r["eval_guidance"]) for r in series], series, marker="o", markersize=3,
                             color="black" if variant == "ppo" else None, label=variant)  # fmt: skip
         ax.set_xscale("log")
-        ax.set_title(f"{env} at {step_label(at)} steps", fontsize=9)
-        ax.set_xlabel("eval guidance γ", fontsize=8)
-        ax.set_ylabel("return", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.grid(alpha=0.3)
+        style_axis(ax, f"{env} at {step_label(at)} steps", "eval guidance γ", "return", steps_on_x=False)
     fig.tight_layout()
     shared_legend(fig, axes[0])
     return fig
@@ -303,12 +304,7 @@ def learning_curves(run_paths, output, written, bins: int = 50) -> None:
             rows = [{"mean": m, "ci95": h} for m, h, _, _ in stats_per_bin]
             plot_series(ax, centres, rows, color="black" if variant == "ppo" else None, linewidth=1,
                         label=f"{variant} (n={len(seeds)})")  # fmt: skip
-        ax.set_title(env, fontsize=9)
-        ax.set_xlabel("training steps", fontsize=8)
-        ax.set_ylabel("episodic return", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
-        ax.grid(alpha=0.3)
+        style_axis(ax, env, "training steps", "episodic return", steps_on_x=True)
         ax.legend(fontsize=6, frameon=False)
     fig.tight_layout()
     save_figure(fig, output / "learning_curves", written)
