@@ -199,17 +199,19 @@ def panels(n: int):
     return fig, axes.ravel()[:n]
 
 
-def plot_series(ax, xs, rows, **style):
+def plot_series(ax, xs, rows, errorbars=True, **style):
+    """A line of means with its 95% CI as a band and, at the points, error bars."""
     means = np.array([float(r["mean"]) for r in rows])
     cis = np.nan_to_num(np.array([float(r["ci95"]) for r in rows]))
     (line,) = ax.plot(xs, means, **style)
     ax.fill_between(xs, means - cis, means + cis, color=line.get_color(), alpha=0.12, linewidth=0)
-    ax.errorbar(xs, means, yerr=cis, fmt="none", ecolor=line.get_color(), capsize=2, linewidth=0.8)
+    if errorbars:
+        ax.errorbar(xs, means, yerr=cis, fmt="none", ecolor=line.get_color(), capsize=2, linewidth=0.8)
     return line
 
 
 def steps_formatter(x, _pos) -> str:
-    return f"{x / 1e6:g}M" if x >= 1e6 else f"{x / 1e3:g}K"
+    return f"{x / 1e6:g}M" if x >= 1e6 else f"{x / 1e3:g}K" if x else "0"
 
 
 def style_axis(ax, title: str, xlabel: str, ylabel: str, steps_on_x: bool) -> None:
@@ -302,7 +304,7 @@ def learning_curves(run_paths, output, written, bins: int = 50) -> None:
             centres = (edges[:-1] + edges[1:]) / 2
             stats_per_bin = [mean_ci95(col[~np.isnan(col)]) if (~np.isnan(col)).any() else (np.nan,) * 4 for col in per_seed.T]
             rows = [{"mean": m, "ci95": h} for m, h, _, _ in stats_per_bin]
-            plot_series(ax, centres, rows, color="black" if variant == "ppo" else None, linewidth=1,
+            plot_series(ax, centres, rows, errorbars=False, color="black" if variant == "ppo" else None, linewidth=1,
                         label=f"{variant} (n={len(seeds)})")  # fmt: skip
         style_axis(ax, env, "training steps", "episodic return", steps_on_x=True)
         ax.legend(fontsize=6, frameon=False)
