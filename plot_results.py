@@ -20,6 +20,8 @@ Writes into --output (and prints each path):
                                 with stratified-bootstrap 95% CIs (scipy.stats.bootstrap)
   compare_paper.md / .csv       (--compare-paper) our cells beside the paper's; flags every cell whose
                                 CI does not overlap the paper's
+  controls.md                   when the sweeps hold several evaluation modes (--deterministic,
+                                --uniform-null): the modes side by side, cell by cell
 """
 
 import csv
@@ -69,7 +71,7 @@ class InputError(Exception):
     """Bad input: reported as one line, exit status 2."""
 
 
-def read_episodes(paths, policy: str, null_branch: str) -> list[dict]:
+def read_episodes(paths) -> list[dict]:
     rows = []
     for raw in paths:
         path = Path(raw)
@@ -84,10 +86,30 @@ def read_episodes(paths, policy: str, null_branch: str) -> list[dict]:
             if missing:
                 raise InputError(f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?")
             rows.extend(reader)
-    rows = [r for r in rows if r["policy"] == policy and r["null_branch"] == null_branch]
-    if not rows:
-        raise InputError(f"no episodes with policy={policy} and null_branch={null_branch} in {list(paths)}")
     return rows
+
+
+def select_mode(rows: list[dict], policy: str, null_branch: str) -> list[dict]:
+    selected = [r for r in rows if r["policy"] == policy and r["null_branch"] == null_branch]
+    if not selected:
+        raise InputError(f"no episodes with policy={policy} and null_branch={null_branch}")
+    return selected
+
+
+def controls_table(summary_all: list[dict]) -> str:
+    """The evaluation modes side by side (sampled or deterministic, learned or uniform null branch),
+    on the cells that more than one mode evaluated."""
+    modes = sorted({(r["policy"], r["null_branch"]) for r in summary_all})
+    by_cell = defaultdict(dict)
+    for r in summary_all:
+        by_cell[(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))][(r["policy"], r["null_branch"])] = r
+    lines = ["| env | variant | step | eval γ | " + " | ".join(f"{p}, {n} null" for p, n in modes) + " |",
+             "|---|---|---|---|" + "---|" * len(modes)]  # fmt: skip
+    for (env, variant, step, gamma), cells in sorted(by_cell.items()):
+        if len(cells) > 1:
+            values = [fmt_cell(cells.get(mode), latex=False) for mode in modes]
+            lines.append(f"| {env} | {variant} | {step_label(step)} | {gamma:g} | " + " | ".join(values) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def kind_of(env_id: str) -> str:
@@ -403,8 +425,11 @@ def simple_markdown(rows: list[dict]) -> str:
 
 def generate(args: Args) -> list[Path]:
     output = Path(args.output)
-    summary = summarise(read_episodes(args.sweeps, args.policy, args.null_branch))
+    episodes = read_episodes(args.sweeps)
+    summary = summarise(select_mode(episodes, args.policy, args.null_branch))
     written: list[Path] = []
+    if len({(r["policy"], r["null_branch"]) for r in episodes}) > 1:
+        write(output / "controls.md", controls_table(summarise(episodes)), written)
     by_kind = defaultdict(list)
     for r in summary:
         by_kind[kind_of(r["env_id"])].append(r)

@@ -86,7 +86,7 @@ def test_comparison_flags_exactly_the_disagreeing_cells(sweep_dir, tmp_path):
 
 def test_figures_have_one_line_per_gamma_plus_ppo(sweep_dir, tmp_path):
     written = generate(sweep_dir, tmp_path)
-    summary = sweep.summarise(plots.read_episodes([sweep_dir], "sample", "learned"))
+    summary = sweep.summarise(plots.select_mode(plots.read_episodes([sweep_dir]), "sample", "learned"))
     fig = plots.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "pgg_g1.1")
     for ax in fig.axes:
         lines = [line for line in ax.get_lines() if not line.get_label().startswith("_")]  # not error-bar caps
@@ -112,6 +112,19 @@ def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
     row = next(r for r in aggregate if r["variant"] == "pgg_g1.1" and r["step"] == "200000" and r["eval_guidance"] == "2.0")
     assert float(row["iqm"]) == pytest.approx(1.0, abs=0.02)  # best cell in both envs at 200k
     assert float(row["ci_low"]) <= float(row["iqm"]) <= float(row["ci_high"])
+
+
+def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
+    with open(sweep_dir / "episodes.csv") as f:
+        rows = [r for r in csv.DictReader(f) if r["env_id"] == "CartPole-v1" and r["step"] == "100000"]
+    uniform = [r | {"null_branch": "uniform", "return": float(r["return"]) + 10} for r in rows if r["variant"] == "ppo"]
+    sweep.write_csv_atomic(tmp_path / "uniform.csv", sweep.EPISODE_COLUMNS, uniform)
+    plots.generate(plots.Args(sweeps=(str(sweep_dir), str(tmp_path / "uniform.csv")), output=str(tmp_path / "out")))
+    table = (tmp_path / "out" / "controls.md").read_text().splitlines()
+    assert table[0] == "| env | variant | step | eval γ | sample, learned null | sample, uniform null |"
+    assert table[2:] == [f"| CartPole-v1 | ppo | 100k | 1 | 271.0 ± {HALF_WIDTH:.1f} | 281.0 ± {HALF_WIDTH:.1f} |"]
+    # the main tables still report the sampled, learned-null mode only
+    assert f"| PPO | -200.0 ± {HALF_WIDTH:.1f} | 271.0 ± {HALF_WIDTH:.1f} |" in (tmp_path / "out" / "table_discrete.md").read_text()
 
 
 @pytest.mark.parametrize(
