@@ -246,6 +246,23 @@ def style_axis(ax, title: str, xlabel: str, ylabel: str, steps_on_x: bool) -> No
         ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
 
 
+def fit_y_to_means(ax, rows) -> None:
+    """With very few seeds a t interval can dwarf the data (t_{0.975,1} = 12.7): then the axis follows
+    the means, and the bands run off it; the tables carry the full intervals."""
+    means = np.array([float(r["mean"]) for r in rows])
+    cis = np.nan_to_num(np.array([float(r["ci95"]) for r in rows]))
+    lo, hi = means.min(), means.max()
+    span = (hi - lo) or abs(hi) or 1.0
+    if (means + cis).max() - (means - cis).min() > 3 * span:
+        ax.set_ylim(lo - 0.25 * span, hi + 0.25 * span)
+
+
+def seeds_label(rows) -> str:
+    counts = sorted({int(r["n_seeds"]) for r in rows})
+    text = str(counts[0]) if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    return f"{text} seed" + ("" if text == "1" else "s")
+
+
 def shared_legend(fig, ax) -> None:
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, frameon=False,
@@ -269,7 +286,9 @@ def figure_for_variant(summary, envs, variant):
             if all(series):
                 plot_series(ax, steps, series, color=colour, linestyle="--", marker="o", markersize=2.5,
                             label=f"γ={gamma:g}")  # fmt: skip
-        style_axis(ax, env, "training steps", "return", steps_on_x=True)
+        env_rows = [r for r in summary if r["env_id"] == env and (r["variant"] == variant or r["variant"] == "ppo")]
+        style_axis(ax, f"{env} ({seeds_label(env_rows)})", "training steps", "return", steps_on_x=True)
+        fit_y_to_means(ax, env_rows)
     fig.suptitle(f"{variant} checkpoints, eval guidance swept", fontsize=9)
     fig.tight_layout()
     shared_legend(fig, axes[0])
