@@ -232,13 +232,16 @@ class Agent(nn.Module):
     def guided_mean(self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None) -> torch.Tensor:
         """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations.
         `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
-        mean_cond = self.actor_mean(obs)
         if guidance == 1.0 and drop_mask is None:
             # pi_hat = pi exactly. Leaving the branch out of the graph leaves the null embedding with
             # no gradient at all, so gradient clipping and Adam see exactly vanilla PPO's parameters
             # (an all-zero gradient still regroups clip_grad_norm_'s sum and moves it by an ulp).
-            return mean_cond
-        mean_null = self.unconditional_mean()  # PGG
+            return self.actor_mean(obs)
+        # PGG: the null embedding rides along as one extra row of the same actor pass; a separate
+        # one-row pass costs as much as the whole batch at this network size. (Its value can differ
+        # from `unconditional_mean()`, a one-row product, in the last float bit.)
+        means = self.actor_mean(torch.cat([obs, self.null_obs.unsqueeze(0)]))
+        mean_cond, mean_null = means[:-1], means[-1]
         if drop_mask is not None:  # PGG
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)
         return guide(mean_cond, mean_null, guidance)

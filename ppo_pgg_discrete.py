@@ -182,13 +182,16 @@ class Agent(nn.Module):
     ) -> torch.Tensor:
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
         replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
-        logits_cond = self.actor(obs)
         if guidance == 1.0 and drop_mask is None:
             # pi_hat = pi exactly. Leaving the branch out of the graph leaves the null embedding with
             # no gradient at all, so gradient clipping and Adam see exactly vanilla PPO's parameters
             # (an all-zero gradient still regroups clip_grad_norm_'s sum and moves it by an ulp).
-            return logits_cond
-        logits_null = self.unconditional_logits()  # PGG
+            return self.actor(obs)
+        # PGG: the null embedding rides along as one extra row of the same actor pass; a separate
+        # one-row pass costs as much as the whole batch at this network size. (Its value can differ
+        # from `unconditional_logits()`, a one-row product, in the last float bit.)
+        logits = self.actor(torch.cat([obs, self.null_obs.unsqueeze(0)]))
+        logits_cond, logits_null = logits[:-1], logits[-1]
         if drop_mask is not None:  # PGG
             logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)
         return guide(logits_cond, logits_null, guidance)

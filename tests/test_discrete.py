@@ -27,8 +27,8 @@ def run(args: pgg.Args):
 
 
 class FixedLogits(nn.Module):
-    """An actor that returns given null logits for the (one-row) null embedding and given
-    conditional logits for a batch: guidance arithmetic on arbitrary logits."""
+    """An actor that returns given null logits for the null embedding and given conditional logits
+    for the batch rows: guidance arithmetic on arbitrary logits."""
 
     def __init__(self, logits_cond, logits_null):
         super().__init__()
@@ -36,7 +36,11 @@ class FixedLogits(nn.Module):
         self.register_buffer("null", logits_null.unsqueeze(0))
 
     def forward(self, x):
-        return self.null if len(x) == 1 else self.cond
+        if len(x) == 1:  # unconditional_logits()
+            return self.null
+        if len(x) == len(self.cond):  # guided_logits at γ=1: the batch alone
+            return self.cond
+        return torch.cat([self.cond, self.null])  # guided_logits: the batch plus the null row
 
 
 def FixedLogitsAgent(logits_cond, logits_null):

@@ -55,13 +55,19 @@ def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
     agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, kind))
     policy = sweep.GuidedPolicy(agent, ckpt)
     raw = np.random.default_rng(0).normal(size=(16, ckpt["obs_dim"])) * 0.5
-    evaluated = policy.guided(raw, np.full(16, ckpt["args"]["guidance"]))
-    with torch.no_grad():
+    guidance = ckpt["args"]["guidance"]
+    evaluated = policy.guided(raw, np.full(16, guidance))
+    with torch.no_grad():  # the policy that acted in training rollouts, and the one PPO optimised
         if kind == "discrete":
-            trained = agent.guided_logits(torch.as_tensor(raw, dtype=torch.float32), ckpt["args"]["guidance"])
+            obs = torch.as_tensor(raw, dtype=torch.float32)
+            acted = ppo_pgg_discrete.guide(agent.actor(obs), agent.unconditional_logits(), guidance)
+            optimised = agent.guided_logits(obs, guidance)
         else:
-            trained = agent.guided_mean(agent.obs_norm(raw), ckpt["args"]["guidance"])
-    assert torch.equal(evaluated, trained)
+            obs = agent.obs_norm(raw)
+            acted = ppo_pgg_continuous.guide(agent.actor_mean(obs), agent.unconditional_mean(), guidance)
+            optimised = agent.guided_mean(obs, guidance)
+    assert torch.equal(evaluated, acted)
+    torch.testing.assert_close(evaluated, optimised, rtol=1e-6, atol=1e-6)
 
 
 def test_uniform_null_control_is_temperature_scaling(runs):
