@@ -33,7 +33,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
-import gymnasium as gym
 import numpy as np
 import torch
 import tyro
@@ -94,13 +93,13 @@ class InputError(Exception):
 def load_any_checkpoint(path: Path):
     """(agent, checkpoint dict) from a file of either training script; ValueError if it is neither."""
     try:
-        ckpt_kind = torch.load(path, map_location="cpu", weights_only=True).get("action_space")
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
         raise ValueError(f"unreadable checkpoint: {type(e).__name__}: {e}") from None
-    module = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}.get(ckpt_kind)
+    module = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}.get(ckpt.get("action_space"))
     if module is None:
         raise ValueError("not a PGG checkpoint (no known action_space field)")
-    return module.load_checkpoint(path)
+    return module.agent_from_checkpoint(ckpt, path), ckpt
 
 
 def variant_label(train_guidance: float, cond_dropout: float) -> str:

@@ -41,7 +41,7 @@ import numpy as np  # noqa: E402
 import tyro  # noqa: E402
 from scipy import stats  # noqa: E402
 
-from eval_gamma_sweep import mean_ci95, summarise  # noqa: E402
+from eval_gamma_sweep import mean_ci95, summarise, variant_label  # noqa: E402
 
 PAPER_DATA = Path(__file__).resolve().parent / "data" / "paper_results.csv"
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
@@ -113,7 +113,8 @@ def controls_table(summary_all: list[dict]) -> str:
 
 
 def kind_of(env_id: str) -> str:
-    return "continuous" if env_id.endswith(("-v4", "-v5")) and "Acrobot" not in env_id else "discrete"
+    """Groups envs into the paper's two tables: the MuJoCo tasks are the -v4/-v5 ones."""
+    return "continuous" if env_id.endswith(("-v4", "-v5")) else "discrete"
 
 
 def cell_index(summary: list[dict]) -> dict:
@@ -317,8 +318,6 @@ def learning_curves(run_paths, output, written, bins: int = 50) -> None:
     """Episodic training return (TensorBoard charts/episodic_return), binned over steps, per variant:
     mean over seeds of each seed's bin mean, with the t 95% CI."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    from eval_gamma_sweep import variant_label
 
     curves = defaultdict(list)  # (env, variant) -> [(steps, returns)] per seed
     for raw in run_paths:

@@ -450,14 +450,18 @@ def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark
 
 
 def load_checkpoint(path) -> tuple[Agent, dict]:
-    """Rebuilds the agent, normalisation statistics included, from a checkpoint file; returns
-    (agent in eval mode, the checkpoint dict)."""
+    """Rebuilds the agent, normalisation statistics included, from a checkpoint file; returns (agent in eval mode, the checkpoint dict)."""
     ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    return agent_from_checkpoint(ckpt, path), ckpt
+
+
+def agent_from_checkpoint(ckpt: dict, source="checkpoint") -> Agent:
+    """The agent, in eval mode, of an already loaded checkpoint dict."""
     if ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION or ckpt.get("action_space") != "continuous":
-        raise ValueError(f"{path} is not a continuous PGG checkpoint of format {CHECKPOINT_FORMAT_VERSION}")
+        raise ValueError(f"{source} is not a continuous PGG checkpoint of format {CHECKPOINT_FORMAT_VERSION}")
     agent = Agent(ckpt["obs_dim"], ckpt["action_dim"], ckpt["args"]["obs_clip"])
     agent.load_state_dict(ckpt["model"])
-    return agent.eval(), ckpt
+    return agent.eval()
 
 
 def default_run_name(args: Args) -> str:

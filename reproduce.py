@@ -194,7 +194,8 @@ def run_local(todo: list[RunSpec], progress: Progress, workers: int) -> None:
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for future in finished:
-                record(progress, started[future], future.exception(), future.result() if not future.exception() else 0)
+                error = future.exception()
+                record(progress, started[future], error, 0.0 if error else future.result())
             progress.running = min(workers, len(pending))
             progress.show()
 
@@ -268,7 +269,7 @@ def reproduce(args: Args) -> int:
     sweep_dir = eval_gamma_sweep.sweep(sweep_args)
     results.mkdir(parents=True, exist_ok=True)
     for name in ("episodes.csv", "summary.csv"):
-        os.replace(copy_to_tmp(sweep_dir / name, results / name), results / name)
+        copy_atomic(sweep_dir / name, results / name)
     written = plot_results.generate(
         plot_results.Args(sweeps=(str(results),), output=str(results), runs=tuple(trained), compare_paper=True)
     )
@@ -278,10 +279,10 @@ def reproduce(args: Args) -> int:
     return len(progress.failed)
 
 
-def copy_to_tmp(source: Path, destination: Path) -> Path:
+def copy_atomic(source: Path, destination: Path) -> None:
     tmp = destination.with_name(destination.name + ".tmp")
     tmp.write_bytes(source.read_bytes())
-    return tmp
+    os.replace(tmp, destination)
 
 
 def main() -> None:
