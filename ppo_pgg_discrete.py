@@ -310,15 +310,15 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args) 
             pg_loss2 = -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
             pg_loss = torch.max(pg_loss1, pg_loss2).mean()
 
+            mb_returns = b_returns[mb_inds]
             if args.clip_vloss:
-                v_loss_unclipped = (newvalue - b_returns[mb_inds]) ** 2
-                v_clipped = b_values[mb_inds] + torch.clamp(
-                    newvalue - b_values[mb_inds], -args.clip_coef, args.clip_coef
-                )
-                v_loss_clipped = (v_clipped - b_returns[mb_inds]) ** 2
+                mb_values = b_values[mb_inds]
+                v_loss_unclipped = (newvalue - mb_returns) ** 2
+                v_clipped = mb_values + torch.clamp(newvalue - mb_values, -args.clip_coef, args.clip_coef)
+                v_loss_clipped = (v_clipped - mb_returns) ** 2
                 v_loss = 0.5 * torch.max(v_loss_unclipped, v_loss_clipped).mean()
             else:
-                v_loss = 0.5 * ((newvalue - b_returns[mb_inds]) ** 2).mean()
+                v_loss = 0.5 * ((newvalue - mb_returns) ** 2).mean()
 
             entropy_loss = entropy.mean()
             loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
@@ -387,12 +387,12 @@ def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark
 
 
 def load_checkpoint(path) -> tuple[Agent, dict]:
-    """Rebuilds the agent, from a checkpoint file; returns (agent in eval mode, the checkpoint dict)."""
+    """Rebuilds the agent from a checkpoint file; returns (agent in eval mode, the checkpoint dict)."""
     ckpt = torch.load(path, map_location="cpu", weights_only=True)
     return agent_from_checkpoint(ckpt, path), ckpt
 
 
-def agent_from_checkpoint(ckpt: dict, source="checkpoint") -> Agent:
+def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of an already loaded checkpoint dict."""
     if ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION or ckpt.get("action_space") != "discrete":
         raise ValueError(f"{source} is not a discrete PGG checkpoint of format {CHECKPOINT_FORMAT_VERSION}")
