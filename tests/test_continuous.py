@@ -84,7 +84,7 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_mean(self):
-        return None
+        return torch.zeros(self.actor_logstd.shape[-1])  # never used: `guide` is patched to return the conditional branch
 
     def guided_mean(self, obs, guidance, drop_mask=None):
         return self.actor_mean(obs)
@@ -172,8 +172,7 @@ def test_paper_task_steps_through_env_factory(env_id):
     obs, _ = envs.reset(seed=0)
     agent = pgg.Agent(obs.shape[1], envs.single_action_space.shape[0])
     buf = pgg.Rollout.empty(300, 2, obs.shape[1], envs.single_action_space.shape[0])
-    with torch.inference_mode():
-        pgg.collect_rollout(agent, envs, obs, torch.zeros(2), buf, 1.1, lambda r, l: None)
+    pgg.collect_rollout(pgg.RolloutPolicy(agent, 1.1), envs, obs, np.zeros(2, np.float32), buf, lambda r, l: None)
     assert torch.isfinite(buf.obs).all() and buf.rewards.abs().max() <= 10.0
     assert float(agent.obs_norm.count) == pytest.approx(600, abs=1)
 

@@ -140,7 +140,7 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_logits(self):
-        return None
+        return torch.zeros(2)  # never used: `guide` is patched to return the conditional branch
 
     def guided_logits(self, obs, guidance, drop_mask=None):
         return self.actor(obs)
@@ -189,10 +189,9 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     obs, _ = envs.reset(seed=0)
     buf = pgg.Rollout.empty(7, 2, 2)
     episodes = []
-    with torch.inference_mode():
-        next_obs, next_done = pgg.collect_rollout(
-            pgg.Agent(2, 2), envs, torch.from_numpy(obs), torch.zeros(2), buf, 1.0, lambda r, l: episodes.append((r, l))
-        )
+    next_obs, next_done = pgg.collect_rollout(
+        pgg.RolloutPolicy(pgg.Agent(2, 2), 1.0), envs, obs, np.zeros(2, np.float32), buf, lambda r, l: episodes.append((r, l))
+    )
     # env 0: episodes of 3 steps. Every stored obs is a pre-action state; a terminal obs never is.
     assert buf.obs[:, 0].tolist() == [[0, 0], [0, 1], [0, 2], [1, 0], [1, 1], [1, 2], [2, 0]]
     assert buf.dones[:, 0].tolist() == [0, 0, 0, 1, 0, 0, 1]
@@ -203,7 +202,7 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     assert sorted(episodes) == [(6.0, 3), (6.0, 3), (15.0, 5)]
     # GAE must not bootstrap across a boundary: with zero values the advantage is the in-episode return.
     buf.values.zero_()
-    advantages, _ = pgg.compute_gae(buf, torch.zeros(2), next_done, discount=1.0, gae_lambda=1.0)
+    advantages, _ = pgg.compute_gae(buf, torch.zeros(2), torch.from_numpy(next_done), discount=1.0, gae_lambda=1.0)
     assert advantages[:, 0].tolist()[:3] == [6, 5, 3] and advantages[:, 1].tolist()[:5] == [15, 14, 12, 9, 5]
 
 
@@ -234,14 +233,14 @@ def test_same_seed_same_result(tmp_path):
 
 def evaluate(agent, guidance, episodes=10, seed=1000):
     env = gym.make("CartPole-v1")
+    policy, rng = pgg.RolloutPolicy(agent, guidance), np.random.default_rng(seed)
     returns = []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)
         done, total = False, 0.0
         while not done:
-            with torch.no_grad():
-                logits = agent.guided_logits(torch.as_tensor(obs).unsqueeze(0), guidance)
-            obs, reward, terminated, truncated, _ = env.step(int(pgg.sample_categorical(logits)[0]))
+            actions, _, _ = policy.act(obs[None], rng.gumbel(size=(1, 2)))
+            obs, reward, terminated, truncated, _ = env.step(int(actions[0]))
             total, done = total + reward, terminated or truncated
         returns.append(total)
     return float(np.mean(returns))

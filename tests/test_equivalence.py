@@ -12,11 +12,17 @@ import ppo_pgg_discrete as discrete
 
 def test_gumbel_max_sampling_matches_categorical_probabilities():
     torch.manual_seed(0)
-    logits = torch.tensor([[2.0, 0.0, -1.0, 0.5]]).expand(200_000, 4)
-    counts = torch.bincount(discrete.sample_categorical(logits), minlength=4).numpy()
-    expected = logits[0].softmax(-1).numpy() * len(logits)
+    logits = torch.tensor([2.0, 0.0, -1.0, 0.5])
+    agent = discrete.Agent(4, 4)
+    with torch.no_grad():  # an actor whose logits are `logits` whatever the observation
+        agent.actor[-1].weight.zero_()
+        agent.actor[-1].bias.copy_(logits)
+    n = 200_000
+    actions, _, _ = discrete.RolloutPolicy(agent, 1.0).act(np.zeros((n, 4), np.float32), discrete.gumbel_noise(n, 4))
+    counts = np.bincount(actions, minlength=4)
+    expected = logits.softmax(-1).numpy() * n
     assert stats.chisquare(counts, expected).pvalue > 1e-3
-    assert stats.chisquare(counts, np.full(4, len(logits) / 4)).pvalue < 1e-10  # the test has power
+    assert stats.chisquare(counts, np.full(4, n / 4)).pvalue < 1e-10  # the test has power
 
 
 def test_categorical_log_prob_and_entropy_match_torch_distributions():
@@ -52,6 +58,37 @@ def test_rollout_hoisted_null_branch_equals_update_guided_policy(guidance):
         torch.testing.assert_close(hoisted, cagent.guided_mean(cobs, guidance), rtol=1e-6, atol=1e-6)
     if guidance == 1.0:  # PPO: exactly the same
         assert torch.equal(hoisted, cagent.guided_mean(cobs, guidance))
+
+
+@pytest.mark.parametrize("guidance", [1.0, 1.1, 5.0])
+def test_numpy_rollout_policy_matches_agent(guidance):
+    """Rollouts act with a numpy copy of pi_hat and the critic; the update recomputes both in torch.
+    They must agree to float rounding, or the first PPO ratio would not start at 1."""
+    torch.manual_seed(0)
+    agent, obs, gumbel = discrete.Agent(4, 3), torch.randn(64, 4), discrete.gumbel_noise(64, 3)
+    with torch.no_grad():
+        agent.null_obs.normal_()
+        logits = agent.guided_logits(obs, guidance)
+        actions, logprobs, values = discrete.RolloutPolicy(agent, guidance).act(obs.numpy(), gumbel)
+        assert np.array_equal(actions, (logits + torch.from_numpy(gumbel)).argmax(-1).numpy())
+        expected = logits.log_softmax(-1).gather(-1, torch.from_numpy(actions).unsqueeze(-1)).squeeze(-1)
+        torch.testing.assert_close(torch.from_numpy(logprobs), expected, rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(torch.from_numpy(values), agent.get_value(obs), rtol=1e-5, atol=1e-6)
+
+    cagent, raw = continuous.Agent(11, 3), np.random.default_rng(0).normal(2.0, 3.0, (64, 11))
+    noise = torch.randn(64, 3).numpy()
+    with torch.no_grad():
+        cagent.null_obs.normal_()
+        cagent.actor_logstd.fill_(-1.0)
+        cagent.obs_norm.update(raw)
+        policy = continuous.RolloutPolicy(cagent, guidance)
+        obs = policy.obs_norm.normalise(raw)
+        actions, logprobs, values = policy.act(obs, noise)
+        mean = cagent.guided_mean(torch.from_numpy(obs), guidance)
+        torch.testing.assert_close(torch.from_numpy(actions), mean + cagent.actor_logstd.exp() * torch.from_numpy(noise))
+        expected = continuous.gaussian_log_prob(torch.from_numpy(actions), mean, cagent.actor_logstd)
+        torch.testing.assert_close(torch.from_numpy(logprobs), expected, rtol=1e-5, atol=1e-5)
+        torch.testing.assert_close(torch.from_numpy(values), cagent.get_value(cagent.obs_norm(raw)), rtol=1e-5, atol=1e-6)
 
 
 def test_fused_adam_update_matches_per_tensor_adam():
