@@ -352,20 +352,23 @@ def collect_rollout(policy: RolloutPolicy, envs, raw_obs, next_done, buf: Rollou
     return raw_obs, next_done
 
 
-def compute_gae(buf: Rollout, next_value, next_done, discount: float, gae_lambda: float):
-    """Generalized advantage estimation; returns (advantages, returns), each (num_steps, num_envs)."""
-    num_steps = buf.rewards.shape[0]
-    advantages = torch.zeros_like(buf.rewards)
-    lastgaelam = torch.zeros_like(next_value)
+def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, discount: float, gae_lambda: float):
+    """Generalized advantage estimation; returns (advantages, returns) as tensors, each (num_steps,
+    num_envs). The loop over time runs in numpy: a handful of operations on num_envs numbers per step,
+    the same float32 arithmetic as torch's at a fraction of its per-call cost."""
+    rewards, values, dones = buf.rewards.numpy(), buf.values.numpy(), buf.dones.numpy()
+    num_steps = rewards.shape[0]
+    advantages = np.zeros_like(rewards)
+    lastgaelam = np.zeros_like(next_value)
     for t in reversed(range(num_steps)):
         if t == num_steps - 1:
             nextnonterminal, nextvalues = 1.0 - next_done, next_value
         else:
-            nextnonterminal, nextvalues = 1.0 - buf.dones[t + 1], buf.values[t + 1]
-        delta = buf.rewards[t] + discount * nextvalues * nextnonterminal - buf.values[t]
+            nextnonterminal, nextvalues = 1.0 - dones[t + 1], values[t + 1]
+        delta = rewards[t] + discount * nextvalues * nextnonterminal - values[t]
         lastgaelam = delta + discount * gae_lambda * nextnonterminal * lastgaelam
         advantages[t] = lastgaelam
-    return advantages, advantages + buf.values
+    return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
 def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args) -> dict[str, float]:
@@ -583,8 +586,8 @@ def train(args: Args, run_dir: Path) -> None:
         global_step += batch_size
         # Bootstrap from the next observation normalised like the ones it follows; the next
         # rollout's first step updates the statistics with it.
-        next_value = torch.from_numpy(policy.value(agent.obs_norm.normalise(raw_obs)))
-        advantages, returns = compute_gae(buf, next_value, torch.from_numpy(next_done), args.discount, args.gae_lambda)
+        next_value = policy.value(agent.obs_norm.normalise(raw_obs))
+        advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
         stats = ppo_update(agent, optimizer, buf, advantages, returns, args)
         stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))

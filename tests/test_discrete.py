@@ -202,7 +202,7 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     assert sorted(episodes) == [(6.0, 3), (6.0, 3), (15.0, 5)]
     # GAE must not bootstrap across a boundary: with zero values the advantage is the in-episode return.
     buf.values.zero_()
-    advantages, _ = pgg.compute_gae(buf, torch.zeros(2), torch.from_numpy(next_done), discount=1.0, gae_lambda=1.0)
+    advantages, _ = pgg.compute_gae(buf, np.zeros(2, np.float32), next_done, discount=1.0, gae_lambda=1.0)
     assert advantages[:, 0].tolist()[:3] == [6, 5, 3] and advantages[:, 1].tolist()[:5] == [15, 14, 12, 9, 5]
 
 
