@@ -282,7 +282,8 @@ class RolloutPolicy:
     and observation statistics (the weights are fixed until the update). On one observation every
     torch call pays microseconds of dispatch, an nn.Sequential pass ~35 µs, and these made up most of
     a rollout step's own time; the same float32 arithmetic in numpy made training ~1.3x faster (README,
-    Performance). The values agree with the Agent's to float rounding (tests/test_equivalence.py)."""
+    Performance). The values agree with the Agent's to float rounding (tests/test_equivalence.py).
+    It caches pi(.|null) and σ: build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):
         self.actor, self.critic = numpy_layers(agent.actor_mean), numpy_layers(agent.critic)

@@ -227,7 +227,8 @@ class RolloutPolicy:
     (they are fixed until the update). On a batch of a few observations every torch call pays
     microseconds of dispatch, an nn.Sequential pass ~35 µs, and these made up most of a rollout step;
     the same float32 arithmetic in numpy made training ~1.3x faster (README, Performance). The values
-    agree with the Agent's to float rounding (tests/test_equivalence.py)."""
+    agree with the Agent's to float rounding (tests/test_equivalence.py). It caches pi(.|null):
+    build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):
         self.actor, self.critic = numpy_layers(agent.actor), numpy_layers(agent.critic)
