@@ -140,7 +140,7 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_logits(self):
-        return torch.zeros(2)  # never used: `guide` is patched to return the conditional branch
+        return torch.zeros(self.actor[-1].out_features)  # never used: `guide` is patched to return the conditional branch
 
     def guided_logits(self, obs, guidance, drop_mask=None):
         return self.actor(obs)
