@@ -289,7 +289,7 @@ class RolloutPolicy:
         self.actor, self.critic = numpy_layers(agent.actor_mean), numpy_layers(agent.critic)
         self.obs_norm = agent.obs_norm
         self.guidance = guidance
-        self.logstd = agent.actor_logstd.detach().numpy()[0]
+        self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
         with torch.no_grad():
             self.mean_null = agent.unconditional_mean().numpy()  # PGG: pi(.|null) is fixed here too

@@ -41,11 +41,12 @@ class Args:
 
 def load_script(source: str, name: str):
     """The module defined by `source`, a training script's text."""
-    with tempfile.NamedTemporaryFile("w", suffix=".py", delete=False) as f:
-        f.write(source)
-    spec = importlib.util.spec_from_file_location(name, f.name)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp, f"{name}.py")
+        path.write_text(source)
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
     return module
 
 
@@ -71,7 +72,12 @@ def main() -> None:
     args = tyro.cli(Args)
     import gymnasium as gym
 
-    discrete = isinstance(gym.make(args.env_id).action_space, gym.spaces.Discrete)
+    try:
+        env = gym.make(args.env_id)
+    except (gym.error.Error, ImportError) as e:
+        sys.exit(f"error: cannot make environment {args.env_id!r}: {e}")
+    discrete = isinstance(env.action_space, gym.spaces.Discrete)
+    env.close()
     script = "ppo_pgg_discrete.py" if discrete else "ppo_pgg_continuous.py"
     shown = subprocess.run(["git", "show", f"{args.rev}:{script}"], cwd=ROOT, capture_output=True, text=True)
     if shown.returncode:
