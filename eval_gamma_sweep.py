@@ -46,6 +46,9 @@ PAPER_GAMMAS = {
     "continuous": (1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.3, 1.5),
 }
 MIN_FORWARD_ROWS = 8
+# Part of every cell's identity; raised when a fix changes what a cell evaluates to, so that a rerun
+# recomputes cells from before it. 2: continuous actions clipped to the env's bounds.
+EVALUATOR_REVISION = 2
 EPISODE_COLUMNS = [
     "env_id", "variant", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
     "eval_guidance", "policy", "null_branch", "episode", "episode_seed", "return", "length",
@@ -142,8 +145,13 @@ class GuidedPolicy:
             else:
                 self.null = agent.unconditional_mean()
                 self.std = agent.actor_logstd.exp()[0]
-                self.low = torch.tensor(ckpt["action_low"], dtype=torch.float32)
-                self.high = torch.tensor(ckpt["action_high"], dtype=torch.float32)
+                # The environment's own bounds, which training clipped actions to. Not the checkpoint's
+                # copy: checkpoints saved before 2026-11-22 hold ClipAction's ±inf there, and MuJoCo
+                # tasks charge their control cost on the action as given.
+                probe = make_eval_env(ckpt)
+                self.low = torch.as_tensor(probe.action_space.low, dtype=torch.float32)
+                self.high = torch.as_tensor(probe.action_space.high, dtype=torch.float32)
+                probe.close()
 
     @torch.no_grad()
     def guided(self, raw_obs: np.ndarray, guidance: np.ndarray) -> torch.Tensor:
@@ -257,7 +265,7 @@ def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple) -> 
     """One file per (checkpoint, γ, settings); the checkpoint's own bytes are part of its identity,
     so a retrained run is never mistaken for the one evaluated before."""
     stat = checkpoint.stat()
-    key = f"{checkpoint.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{gamma!r}|{settings!r}"
+    key = f"{checkpoint.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{gamma!r}|{settings!r}|{EVALUATOR_REVISION}"
     digest = hashlib.sha1(key.encode()).hexdigest()[:16]
     return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{digest}.csv"
 

@@ -474,7 +474,7 @@ def checkpoint_path(run_dir: Path, mark: int) -> Path:
 def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark: int, envs) -> None:
     """Self-contained, pickle-free checkpoint (loads with weights_only=True), written atomically.
     The model's state dict includes the observation-normalisation statistics."""
-    action_space = envs.single_action_space
+    action_space = envs.unwrapped.envs[0].unwrapped.action_space  # the env's own bounds, not ClipAction's ±inf
     payload = {
         "format_version": CHECKPOINT_FORMAT_VERSION,
         "script": "ppo_pgg_continuous",

@@ -70,6 +70,18 @@ def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
     torch.testing.assert_close(evaluated, optimised, rtol=1e-6, atol=1e-6)
 
 
+def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
+    agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, "continuous"))
+    assert ckpt["action_low"] == [-1.0] * 3 and ckpt["action_high"] == [1.0] * 3  # Hopper's, not ClipAction's
+    # Checkpoints saved before the fix hold ClipAction's infinite bounds; the env's still apply.
+    ckpt = {**ckpt, "action_low": [-math.inf] * 3, "action_high": [math.inf] * 3}
+    policy = sweep.GuidedPolicy(agent, ckpt)
+    raw = np.random.default_rng(2).normal(size=(64, ckpt["obs_dim"]))
+    noise = np.random.default_rng(3).normal(size=(64, 3)) * 5
+    actions = policy.act(raw, np.full(64, 30.0), noise, deterministic=False)
+    assert np.abs(actions).max() == 1.0 and (np.abs(actions) == 1.0).mean() > 0.5
+
+
 def test_uniform_null_control_is_temperature_scaling(runs):
     agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, "discrete"))
     raw = np.random.default_rng(1).normal(size=(10, 4)) * 0.1
