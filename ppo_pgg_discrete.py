@@ -185,9 +185,9 @@ class Agent(nn.Module):
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
         replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
         if guidance == 1.0 and drop_mask is None:
-            # pi_hat = pi exactly. Leaving the branch out of the graph leaves the null embedding with
-            # no gradient at all, so gradient clipping and Adam see exactly vanilla PPO's parameters
-            # (an all-zero gradient still regroups clip_grad_norm_'s sum and moves it by an ulp).
+            # pi_hat = pi exactly, from PPO's own actor pass: an extra null row could change how the
+            # product is blocked, hence its rounding. The null embedding gets no gradient (and train
+            # leaves it out of the optimizer).
             return self.actor(obs)
         # PGG: the null embedding rides along as one extra row of the same actor pass; a separate
         # one-row pass costs as much as the whole batch at this network size. (Its value can differ
@@ -244,8 +244,9 @@ class RolloutPolicy:
         logits = guide(numpy_forward(self.actor, obs), self.logits_null, self.guidance)  # PGG: act with pi_hat
         actions = (logits + gumbel).argmax(-1)
         shifted = logits - logits.max(-1, keepdims=True)
-        log_probs = shifted - np.log(np.exp(shifted).sum(-1, keepdims=True))
-        return actions, np.take_along_axis(log_probs, actions[:, None], -1)[:, 0], self.value(obs)
+        # The log-softmax of the sampled actions only: a third of the cost of the full one.
+        log_probs = shifted[np.arange(len(actions)), actions] - np.log(np.exp(shifted).sum(-1))
+        return actions, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
         return numpy_forward(self.critic, obs)[:, 0]
@@ -318,6 +319,23 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
+def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
+    """Moves `params` into one flat buffer and their gradients into another, and returns a Parameter
+    over the two for the optimizer and gradient clipping. On the CPU, Adam and clip_grad_norm_ loop
+    over their tensors in Python: for this agent's 13 small ones that was ~300 µs per minibatch, a sixth
+    of the update; on one tensor it is ~40 µs. The parameters become views of the buffers: the forward
+    pass, autograd and the state dict are unchanged, and backward accumulates into the flat gradient
+    (zero it in place, never set it to None)."""
+    flat = nn.Parameter(torch.cat([p.detach().reshape(-1) for p in params]))
+    flat.grad = torch.zeros_like(flat)
+    offset = 0
+    for p in params:
+        p.data = flat.data[offset : offset + p.numel()].view_as(p)
+        p.grad = flat.grad[offset : offset + p.numel()].view_as(p)
+        offset += p.numel()
+    return flat
+
+
 def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args) -> dict[str, float]:
     """PPO's clipped-objective epochs over one rollout, with pi_hat in place of pi."""
     b_obs = buf.obs.reshape(-1, buf.obs.shape[-1])
@@ -372,9 +390,9 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args) 
             entropy_loss = entropy.mean()
             loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
 
-            optimizer.zero_grad()
+            optimizer.zero_grad(set_to_none=False)  # in place: see flatten_parameters
             loss.backward()
-            nn.utils.clip_grad_norm_(agent.parameters(), args.max_grad_norm)
+            nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], args.max_grad_norm)
             optimizer.step()
 
         if args.target_kl is not None and approx_kl > args.target_kl:
@@ -497,8 +515,13 @@ def train(args: Args, run_dir: Path) -> None:
     envs = make_vector_env(args.env_id, args.num_envs, args.seed)
     obs_dim = envs.single_observation_space.shape[0]
     agent = Agent(obs_dim, envs.single_action_space.n)
-    # fused: one kernel for all parameters; CleanRL's per-tensor Adam costs more than our forward pass.
-    optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, fused=True)
+    # fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
+    # PGG: at γ = 1 without dropout the null embedding is outside the objective. Its all-zero gradient
+    # in the flat buffer would still change the clipping norm's rounding; without it the run is
+    # bit-for-bit PPO.
+    vanilla = args.guidance == 1.0 and args.cond_dropout == 0
+    trained = [p for name, p in agent.named_parameters() if not (vanilla and name == "null_obs")]
+    optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
 
     batch_size = args.num_envs * args.num_steps
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.

@@ -134,6 +134,22 @@ def test_checkpoint_carries_observation_statistics(tmp_path):
     assert torch.equal(torch.tensor(json.loads(out.stdout)).float(), in_process)
 
 
+def test_episodes_are_reported_with_raw_returns():
+    """Episode statistics come from each sub-env's wrapper (under infos["final_info"] with same-step
+    autoreset), recorded before reward normalisation: InvertedPendulum pays 1 per step."""
+    envs = pgg.make_vector_env("InvertedPendulum-v4", 2, seed=0, discount=0.99, reward_clip=10.0)
+    obs, _ = envs.reset(seed=0)
+    buf = pgg.Rollout.empty(200, 2, 4, 1)
+    episodes = []
+    pgg.collect_rollout(
+        pgg.RolloutPolicy(pgg.Agent(4, 1), 1.0), envs, obs, np.zeros(2, np.float32), buf, lambda r, l: episodes.append((r, l))
+    )
+    assert len(episodes) == int(buf.dones.sum()) > 10
+    assert all(episodic_return == length for episodic_return, length in episodes)
+    # The rollout's rewards are normalised (reward / std of the discounted return) and clipped.
+    assert buf.rewards[0].tolist() == [10.0, 10.0] and buf.rewards[-1].max() < 1.0
+
+
 def test_observation_statistics_match_gymnasium():
     rng = np.random.default_rng(0)
     norm = pgg.RunningObsNorm(3, clip=10.0)

@@ -109,7 +109,9 @@ def test_numpy_gae_equals_torch_gae_bit_for_bit():
     assert torch.equal(advantages, expected) and torch.equal(returns, expected + buf.values)
 
 
-def test_fused_adam_update_matches_per_tensor_adam():
+def test_flat_fused_adam_update_matches_per_tensor_adam():
+    """The training scripts' optimizer (fused Adam and clipping on one flat buffer holding every
+    parameter) against CleanRL's (per-tensor Adam and clipping): the same update to float rounding."""
     buf = discrete.Rollout.empty(128, 4, 4)
     torch.manual_seed(0)
     buf.obs.normal_()
@@ -118,11 +120,16 @@ def test_fused_adam_update_matches_per_tensor_adam():
     advantages, returns = torch.randn(128, 4), torch.randn(128, 4)
     args = discrete.Args(guidance=1.1, cond_dropout=0.1)
     results = []
-    for fused in (True, False):
+    for flat in (True, False):
         torch.manual_seed(1)
         agent = discrete.Agent(4, 2)
-        optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, fused=fused, foreach=None if fused else False)
+        initial = {key: value.clone() for key, value in agent.state_dict().items()}
+        if flat:
+            optimizer = torch.optim.Adam([discrete.flatten_parameters(list(agent.parameters()))], lr=args.learning_rate, eps=1e-5, fused=True)
+        else:
+            optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, foreach=False)
         discrete.ppo_update(agent, optimizer, buf, advantages, returns, args)
         results.append(agent.state_dict())
     for key in results[0]:
+        assert not torch.equal(results[0][key], initial[key]), key  # every parameter, the null embedding included, moved
         torch.testing.assert_close(results[0][key], results[1][key], rtol=1e-5, atol=1e-6)
