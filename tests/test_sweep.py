@@ -82,6 +82,14 @@ def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
     assert np.abs(actions).max() == 1.0 and (np.abs(actions) == 1.0).mean() > 0.5
 
 
+def test_a_fix_that_changes_results_invalidates_earlier_cells(runs, tmp_path, monkeypatch):
+    settings = (50, 10_000, False, False)
+    before = sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings)
+    assert sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) == before
+    monkeypatch.setattr(sweep, "EVALUATOR_REVISION", sweep.EVALUATOR_REVISION + 1)
+    assert sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) != before
+
+
 def test_uniform_null_control_is_temperature_scaling(runs):
     agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, "discrete"))
     raw = np.random.default_rng(1).normal(size=(10, 4)) * 0.1
