@@ -323,8 +323,8 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
 def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
     """Moves `params` into one flat buffer and their gradients into another, and returns a Parameter
     over the two for the optimizer and gradient clipping. On the CPU, Adam and clip_grad_norm_ loop
-    over their tensors in Python: for this agent's 13 small ones that was ~300 µs per minibatch, a sixth
-    of the update; on one tensor it is ~40 µs. The parameters become views of the buffers: the forward
+    over their tensors in Python: for this agent's 13 small ones that was ~300 µs per minibatch, about a
+    tenth of the update; on one tensor it is ~40 µs. The parameters become views of the buffers: the forward
     pass, autograd and the state dict are unchanged, and backward accumulates into the flat gradient
     (zero it in place, never set it to None)."""
     flat = nn.Parameter(torch.cat([p.detach().reshape(-1) for p in params]))
