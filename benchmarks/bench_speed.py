@@ -1,6 +1,6 @@
 """Training and sweep throughput, measured in one run on one machine, with the ratios that matter.
 
-    python benchmarks/bench_speed.py                 # about 6 minutes on 2 cores
+    python benchmarks/bench_speed.py                 # about 8 minutes on 2 cores
     python benchmarks/bench_speed.py --repeats 2     # quicker, noisier
 
 Prints, for CartPole-v1 (discrete script) and Hopper-v4 (continuous script):
@@ -8,10 +8,13 @@ Prints, for CartPole-v1 (discrete script) and Hopper-v4 (continuous script):
   - training steps per second at guidance 1 (PPO) and 1.1 (PGG), and the PGG overhead;
   - the γ sweep: env steps per second of the batched evaluator and of the one-env sequential
     reference on the same cells, their ratio, and the batched rate against raw env stepping.
-Configurations alternate across repeats, in alternating order. SPS figures are each configuration's
-best (least disturbed) repeat; ratios between configurations are the median over repeats of the
-ratio within one repeat, whose runs are seconds apart: this machine class's speed drifts by tens of
-percent over minutes, which made ratios of best-of figures swing from -14% to +18%.
+The two guidances train side by side in one process, taking turns one iteration at a time
+(`interleaved_training`), in alternating order across repeats. This machine class's speed drifts by
+tens of percent over minutes, and ratios of whole runs made seconds apart swung from -25% to +57%;
+the same iteration of the two runs is milliseconds to a second apart. The PGG overhead is the ratio
+of their summed iteration times, and of their summed PPO updates (where PGG's extra compute is),
+with bootstrap intervals over the pairs. SPS figures are each configuration's best repeat; the
+speed-up over CleanRL is the median over repeats of the ratio within one repeat.
 
 The speed-up over CleanRL is only meaningful measured in the same run: this machine class's speed
 varies up to 2x with the load of its host. Given a CleanRL checkout and a Python that runs it
@@ -28,6 +31,7 @@ import re
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -51,7 +55,7 @@ class Args:
     """alternating repeats of each training configuration (SPS: the fastest; ratios: the median)"""
     cartpole_steps: int = 40_960
     """training steps per CartPole measurement"""
-    hopper_steps: int = 8_192
+    hopper_steps: int = 16_384
     """training steps per Hopper measurement"""
     sweep_episodes: int = 10
     """episodes per γ in the sweep measurement"""
@@ -98,15 +102,69 @@ def env_rates(module, env_id: str, train_args, steps: int = 20_000, repeats: int
     return best[single], best[vector]
 
 
-def training_sps(module, args) -> float:
-    with tempfile.TemporaryDirectory() as tmp:
-        args.output_dir = tmp
-        run_dir = module.prepare_run_dir(args)
+def interleaved_training(module, runs: list) -> list[dict[str, list[float]]]:
+    """Trains one agent per Args in `runs` (two of them), in threads that take turns one iteration at
+    a time, and returns, per run, the durations in seconds of its turns ("turns") and of its PPO
+    updates ("updates"). Only the thread whose turn it is runs;
+    the other waits on a lock, so each turn is timed as if alone. A turn starts at a call of
+    `collect_rollout`, so turn k is iteration k's rollout, GAE, update and logging; the first turn
+    is the setup, the last ends with the final checkpoint. The same iteration of the two runs is
+    milliseconds (CartPole) to a second (Hopper) apart, so this machine's drift, tens of percent
+    over minutes, cancels in their ratio; whole runs seconds apart could not resolve a 5% difference."""
+    turn = threading.Condition()
+    holder, finished, errors = [0], [False] * len(runs), []
+    durations = [{"turns": [], "updates": []} for _ in runs]
+    local = threading.local()
+    collect_rollout, ppo_update = module.collect_rollout, module.ppo_update
+
+    def wait_for_turn(me: int) -> None:
+        with turn:
+            turn.wait_for(lambda: holder[0] == me)
+        local.start = time.perf_counter()
+
+    def end_turn(me: int, last: bool = False) -> None:
+        durations[me]["turns"].append(time.perf_counter() - local.start)
+        with turn:
+            finished[me] = last
+            others = [k % len(runs) for k in range(me + 1, me + len(runs))]
+            holder[0] = next((k for k in others if not finished[k]), me)
+            turn.notify_all()
+
+    def collect_rollout_in_turn(*args, **kwargs):
+        end_turn(local.me)
+        wait_for_turn(local.me)
+        return collect_rollout(*args, **kwargs)
+
+    def timed_ppo_update(*args, **kwargs):
         start = time.perf_counter()
-        module.train(args, run_dir)
-        elapsed = time.perf_counter() - start
-    iterations = -(-args.total_timesteps // (args.num_envs * args.num_steps))
-    return iterations * args.num_envs * args.num_steps / elapsed
+        stats = ppo_update(*args, **kwargs)
+        durations[local.me]["updates"].append(time.perf_counter() - start)
+        return stats
+
+    def run(me: int, args) -> None:
+        local.me = me
+        wait_for_turn(me)
+        try:
+            with tempfile.TemporaryDirectory() as tmp:
+                args.output_dir = tmp
+                module.train(args, module.prepare_run_dir(args))
+        except BaseException as e:
+            errors.append(e)
+        finally:
+            end_turn(me, last=True)
+
+    module.collect_rollout, module.ppo_update = collect_rollout_in_turn, timed_ppo_update
+    try:
+        threads = [threading.Thread(target=run, args=(me, args)) for me, args in enumerate(runs)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+    finally:
+        module.collect_rollout, module.ppo_update = collect_rollout, ppo_update
+    if errors:
+        raise errors[0]
+    return durations
 
 
 def cleanrl_sps(args: Args, env_id: str, total_timesteps: int) -> float:
@@ -129,6 +187,18 @@ def cleanrl_sps(args: Args, env_id: str, total_timesteps: int) -> float:
 def paired_ratio(numerators: list[float], denominators: list[float]) -> float:
     """Median over repeats of the ratio within each repeat."""
     return float(np.median(np.array(numerators) / np.array(denominators)))
+
+
+def steps_trained(args) -> int:
+    return -(-args.total_timesteps // (args.num_envs * args.num_steps)) * args.num_envs * args.num_steps
+
+
+def overhead_with_interval(base: np.ndarray, treated: np.ndarray, resamples: int = 10_000) -> str:
+    """sum(treated)/sum(base) - 1 over paired durations, with a 95% bootstrap interval that resamples
+    the pairs."""
+    picks = np.random.default_rng(0).integers(0, len(base), (resamples, len(base)))
+    low, high = np.percentile(treated[picks].sum(1) / base[picks].sum(1) - 1, [2.5, 97.5])
+    return f"{treated.sum() / base.sum() - 1:+.1%} ({low:+.1%} to {high:+.1%})"
 
 
 def trained_checkpoint(module, args, tmp: str) -> Path:
@@ -165,22 +235,32 @@ def main() -> None:
     hopper = lambda g: ppo_pgg_continuous.Args(env_id="Hopper-v4", total_timesteps=args.hopper_steps, guidance=g)  # noqa: E731
     configs = [("CartPole-v1", ppo_pgg_discrete, cartpole), ("Hopper-v4", ppo_pgg_continuous, hopper)]
     sps = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1, "cleanrl")}
+    # Paired across the two guidances, iteration by iteration and run by run:
+    iteration_times = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1)}
+    update_times = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1)}
     for repeat in range(args.repeats):
         for env_id, module, make_args in configs:
             # Alternate the order: back-to-back runs in one process are not equally fast (the second
             # was up to 20% slower here), which would bias the PGG overhead.
-            order = [1.0, 1.1] + (["cleanrl"] if args.cleanrl_dir else [])
-            for variant in order if repeat % 2 == 0 else order[::-1]:
-                if variant == "cleanrl":
-                    sps[(env_id, variant)].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
-                else:
-                    sps[(env_id, variant)].append(training_sps(module, make_args(variant)))
+            guidances = [1.0, 1.1] if repeat % 2 == 0 else [1.1, 1.0]
+            if args.cleanrl_dir and repeat % 2:
+                sps[(env_id, "cleanrl")].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
+            runs = [make_args(g) for g in guidances]
+            for g, run, timed in zip(guidances, runs, interleaved_training(module, runs)):
+                sps[(env_id, g)].append(steps_trained(run) / sum(timed["turns"]))
+                iteration_times[(env_id, g)] += timed["turns"][1:-1]  # not the setup, nor the final checkpoint
+                update_times[(env_id, g)] += timed["updates"]
+            if args.cleanrl_dir and not repeat % 2:
+                sps[(env_id, "cleanrl")].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
 
     for env_id, module, make_args in configs:
         train_args = make_args(1.0)
         single, vector = env_rates(module, env_id, train_args)
         ppo, pgg = max(sps[(env_id, 1.0)]), max(sps[(env_id, 1.1)])
         pgg_cost = paired_ratio(sps[(env_id, 1.0)], sps[(env_id, 1.1)])
+        iteration_cost = overhead_with_interval(*(np.array(iteration_times[(env_id, g)]) for g in (1.0, 1.1)))
+        update_cost = overhead_with_interval(*(np.array(update_times[(env_id, g)]) for g in (1.0, 1.1)))
+        iterations, updates = len(iteration_times[(env_id, 1.0)]), len(update_times[(env_id, 1.0)])
         if args.cleanrl_dir:
             cleanrl = max(sps[(env_id, "cleanrl")])
             speedup = f"{paired_ratio(sps[(env_id, 1.1)], sps[(env_id, 'cleanrl')]):.2f}x (same run)"
@@ -198,7 +278,9 @@ def main() -> None:
             (env_id, f"raw env, training vector env of {train_args.num_envs} (steps/s)", f"{vector:,.0f}"),
             (env_id, "training SPS, guidance 1.0 (PPO)", f"{ppo:,.0f}"),
             (env_id, "training SPS, guidance 1.1 (PGG)", f"{pgg:,.0f}"),
-            (env_id, "PGG time overhead, median of SPS(1.0)/SPS(1.1) - 1", f"{pgg_cost - 1:+.1%}"),
+            (env_id, "PGG time overhead, whole runs: median of SPS(1.0)/SPS(1.1) - 1", f"{pgg_cost - 1:+.1%}"),
+            (env_id, f"PGG time overhead, {iterations} paired iterations (95% CI)", iteration_cost),
+            (env_id, f"PGG time overhead, {updates} paired PPO updates (95% CI)", update_cost),
             *([(env_id, "CleanRL's script, same run (SPS)", f"{cleanrl:,.0f}")] if args.cleanrl_dir else []),
             (env_id, "training speed-up over CleanRL, PGG at 1.1", speedup),
             (env_id, "training SPS / raw vector env rate", f"{pgg / vector:.2f}"),
