@@ -58,7 +58,11 @@ class Args:
     hopper_steps: int = 16_384
     """training steps per Hopper measurement"""
     sweep_episodes: int = 10
-    """episodes per γ in the sweep measurement"""
+    """episodes per γ in the sweep measurement (the paper's protocol: 50)"""
+    sweep_checkpoints: tuple[str, ...] = ()
+    """trained checkpoints to time the sweep on, at most one per env; an env without one gets a
+    checkpoint trained here for 4 iterations, whose short, ragged episodes leave the evaluator's
+    batch mostly empty and understate its rate"""
     cleanrl_dir: str | None = None
     """folder holding CleanRL's ppo.py and ppo_continuous_action.py, to time them in the same run"""
     cleanrl_python: str = sys.executable
@@ -201,10 +205,24 @@ def overhead_with_interval(base: np.ndarray, treated: np.ndarray, resamples: int
     return f"{treated.sum() / base.sum() - 1:+.1%} ({low:+.1%} to {high:+.1%})"
 
 
-def trained_checkpoint(module, args, tmp: str) -> Path:
+def sweep_checkpoint(given: dict[str, Path], env_id: str, module, args, tmp: str) -> Path:
+    """The checkpoint given for `env_id`, or one trained here with `args`."""
+    if env_id in given:
+        return given[env_id]
     args.output_dir = tmp
     module.train(args, module.prepare_run_dir(args))
     return sorted(Path(tmp).rglob("step_*.pt"))[-1]
+
+
+def checkpoints_by_env(paths) -> dict[str, Path]:
+    """{env_id: path} of the given checkpoints; exits with one line of error on one that does not load."""
+    by_env = {}
+    for path in map(Path, paths):
+        try:
+            by_env[sweep.load_any_checkpoint(path)[1]["env_id"]] = path
+        except ValueError as e:
+            sys.exit(f"error: --sweep-checkpoints {path}: {str(e).splitlines()[0]}")
+    return by_env
 
 
 def sweep_rates(checkpoint: Path, gammas, episodes: int) -> tuple[float, float]:
@@ -227,6 +245,7 @@ def main() -> None:
         missing = [name for name in CLEANRL_SCRIPTS.values() if not Path(args.cleanrl_dir, name).is_file()]
         if missing:
             sys.exit(f"error: --cleanrl-dir {args.cleanrl_dir} has no {' or '.join(missing)}")
+    given_checkpoints = checkpoints_by_env(args.sweep_checkpoints)
     torch.set_num_threads(1)
     torch.use_deterministic_algorithms(True)  # its first call imports a lot; keep that out of the timings
     rows = []
@@ -270,7 +289,7 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as tmp:
             quick = make_args(1.1)
             quick.total_timesteps = 4 * quick.num_envs * quick.num_steps
-            checkpoint = trained_checkpoint(module, quick, tmp)
+            checkpoint = sweep_checkpoint(given_checkpoints, env_id, module, quick, tmp)
             gammas = sweep.PAPER_GAMMAS["discrete" if module is ppo_pgg_discrete else "continuous"]
             batched, sequential = sweep_rates(checkpoint, gammas, args.sweep_episodes)
         rows += [
