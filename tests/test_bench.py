@@ -1,3 +1,4 @@
+import subprocess
 import sys
 import threading
 
@@ -48,3 +49,20 @@ def test_overhead_interval_contains_the_ratio_of_sums():
     base = np.array([1.0, 2.0, 3.0, 4.0])
     text = bench_speed.overhead_with_interval(base, base * 1.1)
     assert text == "+10.0% (+10.0% to +10.0%)"
+
+
+def test_sweep_checkpoints_are_matched_to_their_env_and_bad_ones_are_one_line_of_error(tmp_path):
+    args = tiny_run(1.1)
+    args.output_dir, args.checkpoint_interval = str(tmp_path), 10**9
+    pgg.train(args, pgg.prepare_run_dir(args))
+    (checkpoint,) = tmp_path.rglob("step_*.pt")
+    assert bench_speed.checkpoints_by_env([str(checkpoint)]) == {"CartPole-v1": checkpoint}
+
+    not_a_checkpoint = tmp_path / "notes.txt"
+    not_a_checkpoint.write_text("not a checkpoint")
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "bench_speed.py"), "--sweep-checkpoints", str(not_a_checkpoint)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert out.returncode != 0
+    assert out.stderr.startswith("error: --sweep-checkpoints") and len(out.stderr.strip().splitlines()) == 1
