@@ -114,7 +114,9 @@ def interleaved_training(module, runs: list) -> list[dict[str, list[float]]]:
     `collect_rollout`, so turn k is iteration k's rollout, GAE, update and logging; the first turn
     is the setup, the last ends with the final checkpoint. The same iteration of the two runs is
     milliseconds (CartPole) to a second (Hopper) apart, so this machine's drift, tens of percent
-    over minutes, cancels in their ratio; whole runs seconds apart could not resolve a 5% difference."""
+    over minutes, cancels in their ratio; whole runs seconds apart could not resolve a 5% difference.
+The runs share the global random generators, so neither reproduces its solo run's learning curve:
+this is for timing only."""
     turn = threading.Condition()
     holder, finished, errors = [0], [False] * len(runs), []
     durations = [{"turns": [], "updates": []} for _ in runs]
