@@ -107,12 +107,12 @@ def env_rates(module, env_id: str, train_args, steps: int = 20_000, repeats: int
 
 
 def interleaved_training(module, runs: list) -> list[dict[str, list[float]]]:
-    """Trains one agent per Args in `runs` (two of them), in threads that take turns one iteration at
-    a time, and returns, per run, the durations in seconds of its turns ("turns") and of its PPO
-    updates ("updates"). Only the thread whose turn it is runs;
-    the other waits on a lock, so each turn is timed as if alone. A turn starts at a call of
-    `collect_rollout`, so turn k is iteration k's rollout, GAE, update and logging; the first turn
-    is the setup, the last ends with the final checkpoint. The same iteration of the two runs is
+    """Trains one agent per Args in `runs`, in threads that take turns one iteration at a time, and
+    returns, per run, the durations in seconds of its turns ("turns") and of its PPO updates
+    ("updates"). Only the thread whose turn it is runs; the others wait on a lock, so each turn is
+    timed as if alone. A turn starts at a call of `collect_rollout`, so turn k is iteration k's
+    rollout, GAE, update and logging; the first turn is the setup, the last ends with the final
+    checkpoint. The same iteration of the two runs is
     milliseconds (CartPole) to a second (Hopper) apart, so this machine's drift, tens of percent
     over minutes, cancels in their ratio; whole runs seconds apart could not resolve a 5% difference.
 The runs share the global random generators, so neither reproduces its solo run's learning curve:
