@@ -22,6 +22,7 @@ of the per-seed mean return, and its 95% confidence interval, see `mean_ci95`).
 """
 
 import csv
+import functools
 import hashlib
 import math
 import multiprocessing
@@ -261,11 +262,18 @@ def settings_of(args: Args) -> tuple:
     return (args.episodes, args.eval_seed, args.deterministic, args.uniform_null)
 
 
+@functools.lru_cache(maxsize=None)
+def content_digest(checkpoint: Path, size: int, mtime_ns: int) -> str:
+    return hashlib.sha1(checkpoint.read_bytes()).hexdigest()
+
+
 def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple) -> Path:
-    """One file per (checkpoint, γ, settings); the checkpoint's own bytes are part of its identity,
-    so a retrained run is never mistaken for the one evaluated before."""
+    """One file per (checkpoint, γ, settings). The checkpoint's bytes, not its path or timestamp, are
+    its identity: a retrained run is never mistaken for the one evaluated before, and a run directory
+    copied to another machine or folder keeps its finished cells."""
     stat = checkpoint.stat()
-    key = f"{checkpoint.resolve()}|{stat.st_size}|{stat.st_mtime_ns}|{gamma!r}|{settings!r}|{EVALUATOR_REVISION}"
+    content = content_digest(checkpoint.resolve(), stat.st_size, stat.st_mtime_ns)
+    key = f"{content}|{gamma!r}|{settings!r}|{EVALUATOR_REVISION}"
     digest = hashlib.sha1(key.encode()).hexdigest()[:16]
     return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{digest}.csv"
 

@@ -1,5 +1,6 @@
 import csv
 import math
+import shutil
 import subprocess
 import sys
 from dataclasses import replace
@@ -88,6 +89,21 @@ def test_a_fix_that_changes_results_invalidates_earlier_cells(runs, tmp_path, mo
     assert sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) == before
     monkeypatch.setattr(sweep, "EVALUATOR_REVISION", sweep.EVALUATOR_REVISION + 1)
     assert sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) != before
+
+
+def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, tmp_path):
+    settings = (50, 10_000, False, False)
+    original = checkpoint(runs, "continuous")
+    moved = tmp_path / "elsewhere" / original.relative_to(runs)
+    moved.parent.mkdir(parents=True)
+    shutil.copy(original, moved)  # a new path and a new timestamp, as on another machine
+    assert moved.stat().st_mtime_ns != original.stat().st_mtime_ns
+    output = tmp_path / "sweep"
+    assert sweep.cell_path(output, moved, 1.0, settings) == sweep.cell_path(output, original, 1.0, settings)
+    changed = tmp_path / "changed" / original.relative_to(runs)
+    changed.parent.mkdir(parents=True)
+    changed.write_bytes(original.read_bytes() + b"\0")
+    assert sweep.cell_path(output, changed, 1.0, settings) != sweep.cell_path(output, original, 1.0, settings)
 
 
 def test_uniform_null_control_is_temperature_scaling(runs):
