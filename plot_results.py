@@ -308,6 +308,10 @@ def gamma_response(summary, envs, step):
                 plot_series(ax, [float(r["eval_guidance"]) for r in series], series, marker="o", markersize=3,
                             color="black" if variant == "ppo" else None, label=variant)  # fmt: skip
         ax.set_xscale("log")
+        # Ticks at the swept γ only: over 1–1.5 a log axis otherwise labels its minor ticks in ×10⁰ form.
+        swept = sorted({float(r["eval_guidance"]) for r in env_rows})
+        ax.set_xticks(swept, labels=[f"{g:g}" for g in swept])
+        ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
         style_axis(ax, f"{env} at {step_label(at)} steps", "eval guidance γ", "return", steps_on_x=False)
     fig.tight_layout()
     shared_legend(fig, axes[0])

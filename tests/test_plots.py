@@ -103,6 +103,16 @@ def test_figures_have_one_line_per_gamma_plus_ppo(sweep_dir, tmp_path):
             assert 5_000 < path.stat().st_size < 5_000_000
 
 
+def test_gamma_response_labels_exactly_the_swept_gammas(sweep_dir):
+    summary = sweep.summarise(plots.select_mode(plots.read_episodes([sweep_dir]), "sample", "learned"))
+    fig = plots.gamma_response(summary, ["CartPole-v1"], step=None)
+    fig.canvas.draw()
+    ax = fig.axes[0]
+    assert ax.get_xscale() == "log"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["1", "2"]
+    assert not [t.get_text() for t in ax.get_xticklabels(minor=True) if t.get_text()]
+
+
 def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
     generate(sweep_dir, tmp_path)
     best = list(csv.DictReader(open(tmp_path / "out" / "best_gamma.csv")))
