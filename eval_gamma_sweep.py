@@ -264,6 +264,8 @@ def settings_of(args: Args) -> tuple:
 
 @functools.lru_cache(maxsize=None)
 def content_digest(checkpoint: Path, size: int, mtime_ns: int) -> str:
+    """sha1 of the file, read once per sweep however many γ cells ask; size and mtime are in the
+    cache key only, so that a checkpoint rewritten during the process is read again."""
     return hashlib.sha1(checkpoint.read_bytes()).hexdigest()
 
 
