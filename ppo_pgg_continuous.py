@@ -47,6 +47,10 @@ class Args:
     """if toggled, `torch.use_deterministic_algorithms(True)`"""
     torch_threads: int = 1
     """torch intra-op threads; one thread is fastest for these small networks"""
+    compile: bool = False
+    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): updates
+    ~1.6x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm,
+    rounded differently (README, Performance)"""
     track: bool = False
     """if toggled, track the run with Weights and Biases (needs `pip install wandb`)"""
     wandb_project_name: str = "pgg"
@@ -113,6 +117,8 @@ def check_args(args: Args) -> str | None:
         return f"--guidance must be a finite number >= 0, got {args.guidance}"
     if not 0.0 <= args.cond_dropout <= 1.0:
         return f"--cond-dropout must lie in [0, 1], got {args.cond_dropout}"
+    if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
+        return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
     if args.checkpoint_interval <= 0:
         return f"--checkpoint-interval must be positive, got {args.checkpoint_interval}"
     if args.total_timesteps <= 0 or args.num_envs <= 0 or args.num_steps <= 0:
@@ -396,79 +402,91 @@ def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
     return flat
 
 
-def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args) -> dict[str, float]:
-    """PPO's clipped-objective epochs over one rollout, with pi_hat in place of pi."""
-    b_obs = buf.obs.reshape(-1, buf.obs.shape[-1])
-    b_actions = buf.actions.reshape(-1, buf.actions.shape[-1])
-    b_logprobs = buf.logprobs.reshape(-1)
-    b_advantages = advantages.reshape(-1)
-    b_returns = returns.reshape(-1)
-    b_values = buf.values.reshape(-1)
-    batch_size = b_obs.shape[0]
+def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):
+    """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
+    place of pi. Returns (loss, stats); the stats are detached tensors, not floats, so that the
+    compiled version (--compile) runs without a break back to Python."""
+    mb_obs = batch["obs"][mb_inds]
+    mean = agent.guided_mean(mb_obs, args.guidance, drop_mask)  # PGG
+    newlogprob = gaussian_log_prob(batch["actions"][mb_inds], mean, agent.actor_logstd)
+    entropy = gaussian_entropy(agent.actor_logstd)
+    newvalue = agent.get_value(mb_obs)
+    logratio = newlogprob - batch["logprobs"][mb_inds]
+    ratio = logratio.exp()
+
+    with torch.no_grad():
+        # http://joschu.net/blog/kl-approx.html
+        old_approx_kl = (-logratio).mean()
+        approx_kl = ((ratio - 1) - logratio).mean()
+        clipfrac = ((ratio - 1.0).abs() > args.clip_coef).float().mean()
+
+    mb_advantages = batch["advantages"][mb_inds]
+    if args.norm_adv:
+        mb_advantages = (mb_advantages - mb_advantages.mean()) / (mb_advantages.std() + 1e-8)
+
+    pg_loss1 = -mb_advantages * ratio
+    pg_loss2 = -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
+    pg_loss = torch.max(pg_loss1, pg_loss2).mean()
+
+    mb_returns = batch["returns"][mb_inds]
+    if args.clip_vloss:
+        mb_values = batch["values"][mb_inds]
+        v_loss_unclipped = (newvalue - mb_returns) ** 2
+        v_clipped = mb_values + torch.clamp(newvalue - mb_values, -args.clip_coef, args.clip_coef)
+        v_loss_clipped = (v_clipped - mb_returns) ** 2
+        v_loss = 0.5 * torch.max(v_loss_unclipped, v_loss_clipped).mean()
+    else:
+        v_loss = 0.5 * ((newvalue - mb_returns) ** 2).mean()
+
+    entropy_loss = entropy.mean()
+    loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+    return loss, {
+        "losses/value_loss": v_loss.detach(),
+        "losses/policy_loss": pg_loss.detach(),
+        "losses/entropy": entropy_loss.detach(),
+        "losses/old_approx_kl": old_approx_kl,
+        "losses/approx_kl": approx_kl,
+        "losses/clipfrac": clipfrac,
+    }
+
+
+def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss) -> dict[str, float]:
+    """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
+    batch = {
+        "obs": buf.obs.reshape(-1, buf.obs.shape[-1]),
+        "actions": buf.actions.reshape(-1, buf.actions.shape[-1]),
+        "logprobs": buf.logprobs.reshape(-1),
+        "advantages": advantages.reshape(-1),
+        "returns": returns.reshape(-1),
+        "values": buf.values.reshape(-1),
+    }
+    batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.num_minibatches
 
     clipfracs = []
     for _ in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
-            mb_inds = b_inds[start : start + minibatch_size]
-            mb_obs = b_obs[mb_inds]
             drop_mask = None
             if args.cond_dropout > 0:  # PGG: conditioning dropout
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout
-            mean = agent.guided_mean(mb_obs, args.guidance, drop_mask)  # PGG
-            newlogprob = gaussian_log_prob(b_actions[mb_inds], mean, agent.actor_logstd)
-            entropy = gaussian_entropy(agent.actor_logstd)
-            newvalue = agent.get_value(mb_obs)
-            logratio = newlogprob - b_logprobs[mb_inds]
-            ratio = logratio.exp()
-
-            with torch.no_grad():
-                # http://joschu.net/blog/kl-approx.html
-                old_approx_kl = (-logratio).mean()
-                approx_kl = ((ratio - 1) - logratio).mean()
-                clipfracs.append(((ratio - 1.0).abs() > args.clip_coef).float().mean().item())
-
-            mb_advantages = b_advantages[mb_inds]
-            if args.norm_adv:
-                mb_advantages = (mb_advantages - mb_advantages.mean()) / (mb_advantages.std() + 1e-8)
-
-            pg_loss1 = -mb_advantages * ratio
-            pg_loss2 = -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
-            pg_loss = torch.max(pg_loss1, pg_loss2).mean()
-
-            mb_returns = b_returns[mb_inds]
-            if args.clip_vloss:
-                mb_values = b_values[mb_inds]
-                v_loss_unclipped = (newvalue - mb_returns) ** 2
-                v_clipped = mb_values + torch.clamp(newvalue - mb_values, -args.clip_coef, args.clip_coef)
-                v_loss_clipped = (v_clipped - mb_returns) ** 2
-                v_loss = 0.5 * torch.max(v_loss_unclipped, v_loss_clipped).mean()
-            else:
-                v_loss = 0.5 * ((newvalue - mb_returns) ** 2).mean()
-
-            entropy_loss = entropy.mean()
-            loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+            loss, stats = loss_fn(agent, batch, b_inds[start : start + minibatch_size], drop_mask, args)
+            clipfracs.append(stats["losses/clipfrac"])
 
             optimizer.zero_grad(set_to_none=False)  # in place: see flatten_parameters
             loss.backward()
             nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], args.max_grad_norm)
             optimizer.step()
 
-        if args.target_kl is not None and approx_kl > args.target_kl:
+        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:
             break
 
-    y_pred, y_true = b_values.numpy(), b_returns.numpy()
+    y_pred, y_true = batch["values"].numpy(), batch["returns"].numpy()
     var_y = np.var(y_true)
-    return {
-        "losses/value_loss": v_loss.item(),
-        "losses/policy_loss": pg_loss.item(),
-        "losses/entropy": entropy_loss.item(),
-        "losses/old_approx_kl": old_approx_kl.item(),
-        "losses/approx_kl": approx_kl.item(),
-        "losses/clipfrac": float(np.mean(clipfracs)),
-        "losses/explained_variance": float("nan") if var_y == 0 else float(1 - np.var(y_true - y_pred) / var_y),
-    }
+    stats = {key: value.item() for key, value in stats.items()}
+    stats["losses/clipfrac"] = torch.stack(clipfracs).mean().item()
+    stats["losses/explained_variance"] = float("nan") if var_y == 0 else float(1 - np.var(y_true - y_pred) / var_y)
+    return stats
 
 
 @torch.no_grad()
@@ -589,6 +607,9 @@ def train(args: Args, run_dir: Path) -> None:
     vanilla = args.guidance == 1.0 and args.cond_dropout == 0
     trained = [p for name, p in agent.named_parameters() if not (vanilla and name == "null_obs")]
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
+    # One fused kernel for the loss and one for its backward, in place of ~200 small ops whose
+    # per-call dispatch dominates an update of this size on the CPU.
+    loss_fn = torch.compile(minibatch_loss) if args.compile else minibatch_loss
 
     batch_size = args.num_envs * args.num_steps
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
@@ -619,7 +640,7 @@ def train(args: Args, run_dir: Path) -> None:
         next_value = policy.value(agent.obs_norm.normalise(raw_obs))
         advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
-        stats = ppo_update(agent, optimizer, buf, advantages, returns, args)
+        stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
         stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))
         stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
         sps = int(global_step / (time.time() - start_time))

@@ -4,6 +4,7 @@ stream, where bit-for-bit equality cannot hold and statistical equivalence is wh
 
     python benchmarks/compare_learning_curves.py --rev 406cc87~1 --env-id CartPole-v1 --seeds 8
     python benchmarks/compare_learning_curves.py --rev 406cc87~1 --env-id Hopper-v4 --seeds 4 --total-timesteps 100000
+    python benchmarks/compare_learning_curves.py --rev HEAD --compile --seeds 8   # --compile against eager
 
 Each run trains at `--guidance`; its score is the mean episodic return over the whole run (the area
 under the learning curve) and over the last tenth of its episodes. Prints both per revision, with
@@ -37,6 +38,8 @@ class Args:
     """training steps per run"""
     guidance: float = 1.1
     """PGG guidance γ of every run"""
+    compile: bool = False
+    """train the working tree's runs with --compile (the reference's stay eager): the check behind it"""
 
 
 def load_script(source: str, name: str):
@@ -50,14 +53,14 @@ def load_script(source: str, name: str):
     return module
 
 
-def scores(module, args: Args) -> np.ndarray:
+def scores(module, args: Args, compile: bool = False) -> np.ndarray:
     """(seeds, 2): mean episodic return over each run, and over its last tenth of episodes."""
     rows = []
     for seed in range(1, args.seeds + 1):
         with tempfile.TemporaryDirectory() as tmp:
             run_args = module.Args(
                 env_id=args.env_id, total_timesteps=args.total_timesteps, guidance=args.guidance, seed=seed,
-                output_dir=tmp, checkpoint_interval=args.total_timesteps,
+                output_dir=tmp, checkpoint_interval=args.total_timesteps, **({"compile": True} if compile else {}),
             )  # fmt: skip
             run_dir = module.prepare_run_dir(run_args)
             module.train(run_args, run_dir)
@@ -84,7 +87,9 @@ def main() -> None:
         sys.exit(f"error: cannot read {script} at {args.rev}: {shown.stderr.strip().splitlines()[-1]}")
     results = {
         args.rev: scores(load_script(shown.stdout, "reference_script"), args),
-        "working tree": scores(load_script((ROOT / script).read_text(), "current_script"), args),
+        "working tree" + (" --compile" if args.compile else ""): scores(
+            load_script((ROOT / script).read_text(), "current_script"), args, args.compile
+        ),
     }
     print(f"{script} on {args.env_id}, {args.seeds} seeds x {args.total_timesteps:,} steps, guidance {args.guidance:g}")
     for i, what in enumerate(("mean return over the run", "mean return, last tenth")):

@@ -1,3 +1,4 @@
+import os
 import subprocess
 import sys
 from dataclasses import replace
@@ -253,6 +254,27 @@ def test_short_cartpole_run_learns(tmp_path):
     assert evaluate(agent, 1.1) > 150
 
 
+def test_compile_flag_trains_through_the_compiled_loss(tmp_path, monkeypatch):
+    compiled_calls, real_compile = [], torch.compile
+
+    def spy_compile(fn):
+        compiled = real_compile(fn)
+
+        def counted(*args, **kwargs):
+            compiled_calls.append(fn)
+            return compiled(*args, **kwargs)
+
+        return counted
+
+    args = small_args(tmp_path, total_timesteps=256, checkpoint_interval=256, guidance=1.1, cond_dropout=0.25)
+    eager = torch.load(pgg.checkpoint_path(run(args), 256), weights_only=True)["model"]
+    monkeypatch.setattr(pgg.torch, "compile", spy_compile)
+    compiled = torch.load(pgg.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 256), weights_only=True)["model"]
+    assert compiled_calls == [pgg.minibatch_loss] * (args.update_epochs * args.num_minibatches)
+    for key, value in eager.items():  # one iteration's 16 Adam steps: the same update to float rounding
+        torch.testing.assert_close(compiled[key], value, rtol=1e-4, atol=1e-5)
+
+
 # --- bad input ----------------------------------------------------------------------------------
 
 
@@ -266,11 +288,13 @@ def test_short_cartpole_run_learns(tmp_path):
         (["--cond-dropout", "1.5"], "--cond-dropout"),
         (["--checkpoint-interval", "0"], "--checkpoint-interval"),
         (["--output-dir", "/proc/forbidden"], "cannot write the run directory"),
+        (["--compile"], "--compile needs a C++ compiler"),  # run with no compiler on PATH
     ],
 )
 def test_bad_input_exits_with_one_line(flags, message):
+    no_compiler = {key: value for key, value in os.environ.items() if key != "CXX"} | {"PATH": ""}
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags], capture_output=True, text=True, timeout=120
+        [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags], capture_output=True, text=True, timeout=120, env=no_compiler
     )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()
