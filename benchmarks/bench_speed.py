@@ -5,16 +5,20 @@
 
 Prints, for CartPole-v1 (discrete script) and Hopper-v4 (continuous script):
   - raw env stepping: one gym.make env, and the training script's own vector env, random actions;
-  - training steps per second at guidance 1 (PPO) and 1.1 (PGG), and the PGG overhead;
+  - training steps per second at guidance 1 (PPO) and 1.1 (PGG), eager and with --compile, the PGG
+    overhead of each, and what --compile costs once (its compile, with inductor's cache cold and
+    warm) and after how many steps it has paid that back;
   - the γ sweep: env steps per second of the batched evaluator and of the one-env sequential
     reference on the same cells, their ratio, and the batched rate against raw env stepping.
-The two guidances train side by side in one process, taking turns one iteration at a time
-(`interleaved_training`), in alternating order across repeats. This machine class's speed drifts by
+The four configurations train side by side in one process, taking turns one iteration at a time
+(`interleaved_training`), in alternating order across repeats. Their SPS leaves out the setup and
+the first iteration (where --compile compiles) of every run; the compile time is measured apart, as
+the extra wall time of a two-iteration run with --compile in a fresh process. This machine class's speed drifts by
 tens of percent over minutes, and ratios of whole runs made seconds apart swung from -25% to +57%;
 the same iteration of the two runs is milliseconds to a second apart. The PGG overhead is the ratio
 of their summed iteration times, and of their summed PPO updates (where PGG's extra compute is),
 with bootstrap intervals over the pairs. SPS figures are each configuration's best repeat; the
-speed-up over CleanRL is the median over repeats of the ratio within one repeat.
+speed-ups (over CleanRL, of --compile) are medians over repeats of the ratio within one repeat.
 
 The speed-up over CleanRL is only meaningful measured in the same run: this machine class's speed
 varies up to 2x with the load of its host. Given a CleanRL checkout and a Python that runs it
@@ -190,13 +194,33 @@ def cleanrl_sps(args: Args, env_id: str, total_timesteps: int) -> float:
     return float(sps[-1])
 
 
+def compile_seconds(module, env_id: str, steps: int) -> tuple[float, float]:
+    """Extra wall time of a `steps`-long training run with --compile over one without, each in a fresh
+    process (imports, compile and all): with inductor's cache empty, then with it warm."""
+
+    def wall(cache_dir: str, *flags: str) -> float:
+        with tempfile.TemporaryDirectory() as out:
+            command = [sys.executable, module.__file__, "--env-id", env_id, "--total-timesteps", str(steps),
+                       "--guidance", "1.1", "--output-dir", out, *flags]  # fmt: skip
+            start = time.perf_counter()
+            subprocess.run(command, check=True, capture_output=True, env={**os.environ, "TORCHINDUCTOR_CACHE_DIR": cache_dir})
+            return time.perf_counter() - start
+
+    with tempfile.TemporaryDirectory() as cache_dir:
+        eager = min(wall(cache_dir), wall(cache_dir))
+        cold, warm = wall(cache_dir, "--compile"), wall(cache_dir, "--compile")
+    return cold - eager, warm - eager
+
+
+def steady_sps(turns: list[float], batch_size: int) -> float:
+    """Steps per second of a run's iterations after its first (turn 0 is the setup, turn 1 the first
+    iteration, where --compile compiles)."""
+    return batch_size * len(turns[2:]) / sum(turns[2:])
+
+
 def paired_ratio(numerators: list[float], denominators: list[float]) -> float:
     """Median over repeats of the ratio within each repeat."""
     return float(np.median(np.array(numerators) / np.array(denominators)))
-
-
-def steps_trained(args) -> int:
-    return -(-args.total_timesteps // (args.num_envs * args.num_steps)) * args.num_envs * args.num_steps
 
 
 def overhead_with_interval(base: np.ndarray, treated: np.ndarray, resamples: int = 10_000) -> str:
@@ -252,42 +276,72 @@ def main() -> None:
     torch.use_deterministic_algorithms(True)  # its first call imports a lot; keep that out of the timings
     rows = []
 
-    cartpole = lambda g: ppo_pgg_discrete.Args(env_id="CartPole-v1", total_timesteps=args.cartpole_steps, guidance=g)  # noqa: E731
-    hopper = lambda g: ppo_pgg_continuous.Args(env_id="Hopper-v4", total_timesteps=args.hopper_steps, guidance=g)  # noqa: E731
+    cartpole = lambda g, compiled=False: ppo_pgg_discrete.Args(env_id="CartPole-v1", total_timesteps=args.cartpole_steps, guidance=g, compile=compiled)  # noqa: E731
+    hopper = lambda g, compiled=False: ppo_pgg_continuous.Args(env_id="Hopper-v4", total_timesteps=args.hopper_steps, guidance=g, compile=compiled)  # noqa: E731
     configs = [("CartPole-v1", ppo_pgg_discrete, cartpole), ("Hopper-v4", ppo_pgg_continuous, hopper)]
-    sps = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1, "cleanrl")}
+    variants = [(1.0, False), (1.1, False), (1.0, True), (1.1, True)]  # (guidance, --compile)
+    sps = {(env, *v): [] for env, _, _ in configs for v in variants}
+    cleanrl_runs = {env: [] for env, _, _ in configs}
     # Paired across the two guidances, iteration by iteration and run by run:
-    iteration_times = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1)}
-    update_times = {(env, g): [] for env, _, _ in configs for g in (1.0, 1.1)}
+    iteration_times = {(env, *v): [] for env, _, _ in configs for v in variants}
+    update_times = {(env, *v): [] for env, _, _ in configs for v in variants}
     for repeat in range(args.repeats):
         for env_id, module, make_args in configs:
             # Alternate the order: back-to-back runs in one process are not equally fast (the second
             # was up to 20% slower here), which would bias the PGG overhead.
-            guidances = [1.0, 1.1] if repeat % 2 == 0 else [1.1, 1.0]
+            order = variants if repeat % 2 == 0 else variants[::-1]
             if args.cleanrl_dir and repeat % 2:
-                sps[(env_id, "cleanrl")].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
-            runs = [make_args(g) for g in guidances]
-            for g, run, timed in zip(guidances, runs, interleaved_training(module, runs)):
-                sps[(env_id, g)].append(steps_trained(run) / sum(timed["turns"]))
-                iteration_times[(env_id, g)] += timed["turns"][1:-1]  # not the setup, nor the final checkpoint
-                update_times[(env_id, g)] += timed["updates"]
+                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
+            runs = [make_args(*v) for v in order]
+            for v, run, timed in zip(order, runs, interleaved_training(module, runs)):
+                sps[(env_id, *v)].append(steady_sps(timed["turns"], run.num_envs * run.num_steps))
+                iteration_times[(env_id, *v)] += timed["turns"][2:-1]  # not the setup, the first iteration, the final checkpoint
+                update_times[(env_id, *v)] += timed["updates"][1:]
             if args.cleanrl_dir and not repeat % 2:
-                sps[(env_id, "cleanrl")].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
+                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
 
     for env_id, module, make_args in configs:
         train_args = make_args(1.0)
         single, vector = env_rates(module, env_id, train_args)
-        ppo, pgg = max(sps[(env_id, 1.0)]), max(sps[(env_id, 1.1)])
-        pgg_cost = paired_ratio(sps[(env_id, 1.0)], sps[(env_id, 1.1)])
-        iteration_cost = overhead_with_interval(*(np.array(iteration_times[(env_id, g)]) for g in (1.0, 1.1)))
-        update_cost = overhead_with_interval(*(np.array(update_times[(env_id, g)]) for g in (1.0, 1.1)))
-        iterations, updates = len(iteration_times[(env_id, 1.0)]), len(update_times[(env_id, 1.0)])
+        batch_size = train_args.num_envs * train_args.num_steps
+        cold, warm = compile_seconds(module, env_id, 2 * batch_size)
+        rows += [
+            (env_id, "raw env, one gym.make env (steps/s)", f"{single:,.0f}"),
+            (env_id, f"raw env, training vector env of {train_args.num_envs} (steps/s)", f"{vector:,.0f}"),
+        ]
+        for compiled in (False, True):
+            flag = ", --compile" if compiled else ""
+            ppo, pgg = max(sps[(env_id, 1.0, compiled)]), max(sps[(env_id, 1.1, compiled)])
+            pgg_cost = paired_ratio(sps[(env_id, 1.0, compiled)], sps[(env_id, 1.1, compiled)])
+            iteration_cost, update_cost = (
+                overhead_with_interval(*(np.array(times[(env_id, g, compiled)]) for g in (1.0, 1.1)))
+                for times in (iteration_times, update_times)
+            )
+            iterations, updates = len(iteration_times[(env_id, 1.0, compiled)]), len(update_times[(env_id, 1.0, compiled)])
+            if args.cleanrl_dir:
+                speedup = f"{paired_ratio(sps[(env_id, 1.1, compiled)], cleanrl_runs[env_id]):.2f}x (same run)"
+            else:
+                low, high = CLEANRL_SPS[env_id]
+                speedup = f"{pgg / high:.2f}x - {pgg / low:.2f}x (against quoted SPS)"
+            rows += [
+                (env_id, f"training SPS, guidance 1.0 (PPO){flag}", f"{ppo:,.0f}"),
+                (env_id, f"training SPS, guidance 1.1 (PGG){flag}", f"{pgg:,.0f}"),
+                (env_id, f"PGG time overhead{flag}, whole runs: median of SPS(1.0)/SPS(1.1) - 1", f"{pgg_cost - 1:+.1%}"),
+                (env_id, f"PGG time overhead{flag}, {iterations} paired iterations (95% CI)", iteration_cost),
+                (env_id, f"PGG time overhead{flag}, {updates} paired PPO updates (95% CI)", update_cost),
+                (env_id, f"training speed-up over CleanRL, PGG at 1.1{flag}", speedup),
+                (env_id, f"training SPS / raw vector env rate, PGG at 1.1{flag}", f"{pgg / vector:.2f}"),
+            ]
+        eager_pgg, compiled_pgg = (sps[(env_id, 1.1, compiled)] for compiled in (False, True))
+        saved_per_step = 1 / max(eager_pgg) - 1 / max(compiled_pgg)
+        breakeven = "never" if saved_per_step <= 0 else " / ".join(f"{t / saved_per_step:,.0f}" for t in (cold, warm))
+        rows += [
+            (env_id, "--compile speed-up over eager, PGG at 1.1", f"{paired_ratio(compiled_pgg, eager_pgg):.2f}x"),
+            (env_id, "--compile one-off cost, inductor cache cold / warm (s)", f"{cold:.1f} / {warm:.1f}"),
+            (env_id, "--compile pays back after (steps), cache cold / warm", breakeven),
+        ]
         if args.cleanrl_dir:
-            cleanrl = max(sps[(env_id, "cleanrl")])
-            speedup = f"{paired_ratio(sps[(env_id, 1.1)], sps[(env_id, 'cleanrl')]):.2f}x (same run)"
-        else:
-            low, high = CLEANRL_SPS[env_id]
-            speedup = f"{pgg / high:.2f}x - {pgg / low:.2f}x (against quoted SPS)"
+            rows.append((env_id, "CleanRL's script, same run (SPS)", f"{max(cleanrl_runs[env_id]):,.0f}"))
         with tempfile.TemporaryDirectory() as tmp:
             quick = make_args(1.1)
             quick.total_timesteps = 4 * quick.num_envs * quick.num_steps
@@ -295,16 +349,6 @@ def main() -> None:
             gammas = sweep.PAPER_GAMMAS["discrete" if module is ppo_pgg_discrete else "continuous"]
             batched, sequential = sweep_rates(checkpoint, gammas, args.sweep_episodes)
         rows += [
-            (env_id, "raw env, one gym.make env (steps/s)", f"{single:,.0f}"),
-            (env_id, f"raw env, training vector env of {train_args.num_envs} (steps/s)", f"{vector:,.0f}"),
-            (env_id, "training SPS, guidance 1.0 (PPO)", f"{ppo:,.0f}"),
-            (env_id, "training SPS, guidance 1.1 (PGG)", f"{pgg:,.0f}"),
-            (env_id, "PGG time overhead, whole runs: median of SPS(1.0)/SPS(1.1) - 1", f"{pgg_cost - 1:+.1%}"),
-            (env_id, f"PGG time overhead, {iterations} paired iterations (95% CI)", iteration_cost),
-            (env_id, f"PGG time overhead, {updates} paired PPO updates (95% CI)", update_cost),
-            *([(env_id, "CleanRL's script, same run (SPS)", f"{cleanrl:,.0f}")] if args.cleanrl_dir else []),
-            (env_id, "training speed-up over CleanRL, PGG at 1.1", speedup),
-            (env_id, "training SPS / raw vector env rate", f"{pgg / vector:.2f}"),
             (env_id, "sweep, batched evaluator (env steps/s)", f"{batched:,.0f}"),
             (env_id, "sweep, sequential one-env reference (env steps/s)", f"{sequential:,.0f}"),
             (env_id, "sweep speed-up, batched / sequential", f"{batched / sequential:.1f}x"),
@@ -314,9 +358,11 @@ def main() -> None:
     print(f"torch {torch.__version__}, numpy {np.__version__}, {args.repeats} repeat(s)")
     for env_id, what, value in rows:
         print(f"{env_id:12s} {what:{width}s} {value}")
-    for (env_id, variant), values in sps.items():
+    for (env_id, guidance, compiled), values in sps.items():
+        print(f"{env_id:12s} SPS per repeat, {guidance}{' --compile' if compiled else ''}: " + ", ".join(f"{v:,.0f}" for v in values))
+    for env_id, values in cleanrl_runs.items():
         if values:
-            print(f"{env_id:12s} SPS per repeat, {variant}: " + ", ".join(f"{v:,.0f}" for v in values))
+            print(f"{env_id:12s} SPS per repeat, cleanrl: " + ", ".join(f"{v:,.0f}" for v in values))
 
 
 if __name__ == "__main__":

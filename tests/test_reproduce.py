@@ -82,3 +82,9 @@ def test_failed_run_is_reported_and_others_finish(tmp_path, monkeypatch):
     log = tmp_path / "failing" / "runs" / "logs" / "CartPole-v1__ppo__s2.log"
     assert "--guidance must be a finite number" in log.read_text()
     assert (tmp_path / "failing" / "runs" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000002048.pt").exists()
+
+
+def test_compile_flag_reaches_every_training_command(tmp_path):
+    for compile_ in (False, True):
+        specs = reproduce.grid(tiny_args(tmp_path, "compile", compile=compile_))
+        assert len(specs) == 4 and all(("--compile" in spec.command()) == compile_ for spec in specs)
