@@ -160,14 +160,58 @@ def make_vector_env(env_id: str, num_envs: int, seed: int, discount: float, rewa
     def training_env():
         env = gym.wrappers.RecordEpisodeStatistics(make_env(env_id)())
         env = gym.wrappers.ClipAction(env)
-        env = gym.wrappers.NormalizeReward(env, gamma=discount)
-        return gym.wrappers.ClipReward(env, -reward_clip, reward_clip)
+        return NormalizeClipReward(env, discount, reward_clip)
 
     envs = gym.vector.SyncVectorEnv(
         [training_env for _ in range(num_envs)], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP
     )
     envs.action_space.seed(seed)
     return envs
+
+
+class NormalizeClipReward(gym.Wrapper):
+    """gymnasium's NormalizeReward followed by ClipReward, the reward scaling CleanRL puts on each
+    sub-env: rewards are divided by the running standard deviation of the discounted return (which
+    a termination resets and a truncation does not), then clipped. The same float64 operations in
+    the same order, on Python floats: the same bits (tests/test_continuous.py) for ~3 µs a step
+    instead of ~27 (numpy's mean and var of a one-element batch), 7% of a Hopper training step."""
+
+    def __init__(self, env: gym.Env, discount: float, clip: float, epsilon: float = 1e-8):
+        super().__init__(env)
+        self.discount, self.clip, self.epsilon = discount, clip, epsilon
+        self.discounted_return, self.return_mean, self.return_var, self.return_count = 0.0, 0.0, 1.0, 1e-4
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        self.discounted_return = self.discounted_return * self.discount * (1 - terminated) + float(reward)
+        # gymnasium's RunningMeanStd update with a batch of one (mean: the return, variance: 0)
+        delta = self.discounted_return - self.return_mean
+        total = self.return_count + 1
+        self.return_mean += delta / total
+        self.return_var = (self.return_var * self.return_count + delta * delta * self.return_count / total) / total
+        self.return_count = total
+        scaled = reward / math.sqrt(self.return_var + self.epsilon)
+        return obs, min(max(scaled, -self.clip), self.clip), terminated, truncated, info
+
+
+def update_running_moments(mean: np.ndarray, var: np.ndarray, count: np.ndarray, batch: np.ndarray) -> None:
+    """gymnasium's RunningMeanStd update, in place on float64 arrays (`count` 0-d), with the same
+    operations in the same order, at half its cost: np.mean and np.var of a one-row batch cost ~9 µs."""
+    batch_count = batch.shape[0]
+    batch_mean = batch.sum(0) / batch_count
+    batch_var = np.square(batch - batch_mean).sum(0) / batch_count
+    delta = batch_mean - mean
+    total = count + batch_count
+    m2 = var * count + batch_var * batch_count + np.square(delta) * count * batch_count / total
+    mean += delta * batch_count / total
+    var[:] = m2 / total
+    count[...] = total
+
+
+def normalise_obs(raw_obs, mean: np.ndarray, var: np.ndarray, epsilon: float, clip: float) -> np.ndarray:
+    """Normalised, clipped float32 observations from raw ones (array-like, (B, obs_dim))."""
+    normalised = (np.asarray(raw_obs, dtype=np.float64) - mean) / np.sqrt(var + epsilon)
+    return np.minimum(np.maximum(normalised, -clip), clip).astype(np.float32)  # np.clip costs twice as much
 
 
 class RunningObsNorm(nn.Module):
@@ -185,19 +229,10 @@ class RunningObsNorm(nn.Module):
     def update(self, batch: np.ndarray) -> None:
         # numpy on views of the buffers: a dozen torch ops on a few numbers cost more than a MuJoCo
         # step; the float64 arithmetic is the same, so are the results.
-        mean, var, count = self.mean.numpy(), self.var.numpy(), self.count.numpy()
-        batch_mean, batch_var, batch_count = batch.mean(0), batch.var(0), batch.shape[0]
-        delta = batch_mean - mean
-        total = count + batch_count
-        m2 = var * count + batch_var * batch_count + np.square(delta) * count * batch_count / total
-        mean += delta * batch_count / total
-        var[:] = m2 / total
-        count[...] = total
+        update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), batch)
 
     def normalise(self, raw_obs) -> np.ndarray:
-        """Normalised, clipped float32 observations from raw ones (array-like, (B, obs_dim))."""
-        normalised = (np.asarray(raw_obs, dtype=np.float64) - self.mean.numpy()) / np.sqrt(self.var.numpy() + self.epsilon)
-        return np.clip(normalised, -self.clip, self.clip).astype(np.float32)
+        return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
 
     def forward(self, raw_obs) -> torch.Tensor:
         return torch.from_numpy(self.normalise(raw_obs))
@@ -299,12 +334,19 @@ class RolloutPolicy:
 
     def __init__(self, agent: Agent, guidance: float):
         self.actor, self.critic = numpy_layers(agent.actor_mean), numpy_layers(agent.critic)
-        self.obs_norm = agent.obs_norm
+        norm = agent.obs_norm
+        self.obs_mean, self.obs_var, self.obs_count = norm.mean.numpy(), norm.var.numpy(), norm.count.numpy()
+        self.obs_epsilon, self.obs_clip = norm.epsilon, norm.clip
         self.guidance = guidance
         self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
         with torch.no_grad():
             self.mean_null = agent.unconditional_mean().numpy()  # PGG: pi(.|null) is fixed here too
+
+    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
+        """Updates the agent's observation statistics with `raw_obs` and returns it normalised by them."""
+        update_running_moments(self.obs_mean, self.obs_var, self.obs_count, raw_obs)
+        return normalise_obs(raw_obs, self.obs_mean, self.obs_var, self.obs_epsilon, self.obs_clip)
 
     def act(self, obs: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs` of normalised observations;
@@ -350,8 +392,7 @@ def collect_rollout(policy: RolloutPolicy, envs, raw_obs, next_done, buf: Rollou
     )
     noise = torch.randn(buf.actions.shape).numpy()  # the whole rollout's, in one draw
     for step in range(buf.obs.shape[0]):
-        policy.obs_norm.update(raw_obs)
-        obs_buf[step] = policy.obs_norm.normalise(raw_obs)
+        obs_buf[step] = policy.observe(raw_obs)
         dones_buf[step] = next_done
         actions_buf[step], logprobs_buf[step], values_buf[step] = policy.act(obs_buf[step], noise[step])
 

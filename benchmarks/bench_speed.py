@@ -116,11 +116,10 @@ def interleaved_training(module, runs: list) -> list[dict[str, list[float]]]:
     ("updates"). Only the thread whose turn it is runs; the others wait on a lock, so each turn is
     timed as if alone. A turn starts at a call of `collect_rollout`, so turn k is iteration k's
     rollout, GAE, update and logging; the first turn is the setup, the last ends with the final
-    checkpoint. The same iteration of the two runs is
-    milliseconds (CartPole) to a second (Hopper) apart, so this machine's drift, tens of percent
-    over minutes, cancels in their ratio; whole runs seconds apart could not resolve a 5% difference.
-The runs share the global random generators, so neither reproduces its solo run's learning curve:
-this is for timing only."""
+    checkpoint. The same iteration of the runs is milliseconds (CartPole) to a second (Hopper) apart,
+    so this machine's drift, tens of percent over minutes, cancels in their ratio; whole runs seconds
+    apart could not resolve a 5% difference. The runs share the global random generators, so none
+    reproduces its solo run's learning curve: this is for timing only."""
     turn = threading.Condition()
     holder, finished, errors = [0], [False] * len(runs), []
     durations = [{"turns": [], "updates": []} for _ in runs]
@@ -177,8 +176,9 @@ this is for timing only."""
     return durations
 
 
-def cleanrl_sps(args: Args, env_id: str, total_timesteps: int) -> float:
-    """SPS that CleanRL's script reports at its end, run with one torch thread like ours."""
+def cleanrl_sps(args: Args, env_id: str, total_timesteps: int, batch_size: int) -> float:
+    """CleanRL's steps per second after its first iteration, as `steady_sps` counts ours, run with one
+    torch thread like ours."""
     script = Path(args.cleanrl_dir, CLEANRL_SCRIPTS[env_id]).resolve()
     with tempfile.TemporaryDirectory() as tmp:
         out = subprocess.run(
@@ -187,11 +187,13 @@ def cleanrl_sps(args: Args, env_id: str, total_timesteps: int) -> float:
             cwd=tmp, env={**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
             capture_output=True, text=True,
         )  # fmt: skip
-    sps = re.findall(r"^SPS: (\d+)", out.stdout, re.MULTILINE)
-    if out.returncode or not sps:
+    sps = [int(s) for s in re.findall(r"^SPS: (\d+)", out.stdout, re.MULTILINE)]
+    if out.returncode or len(sps) < 2:
         last_line = (out.stderr.strip().splitlines() or ["no output"])[-1]
         sys.exit(f"error: CleanRL's {script.name} failed under {args.cleanrl_python}: {last_line}")
-    return float(sps[-1])
+    # It prints its SPS since the start after every iteration: the k-th is k·batch_size / elapsed.
+    first, last = (k * batch_size / sps[k - 1] for k in (1, len(sps)))
+    return batch_size * (len(sps) - 1) / (last - first)
 
 
 def compile_seconds(module, env_id: str, steps: int) -> tuple[float, float]:
@@ -203,7 +205,8 @@ def compile_seconds(module, env_id: str, steps: int) -> tuple[float, float]:
             command = [sys.executable, module.__file__, "--env-id", env_id, "--total-timesteps", str(steps),
                        "--guidance", "1.1", "--output-dir", out, *flags]  # fmt: skip
             start = time.perf_counter()
-            subprocess.run(command, check=True, capture_output=True, env={**os.environ, "TORCHINDUCTOR_CACHE_DIR": cache_dir})
+            cache = {**os.environ, "TORCHINDUCTOR_CACHE_DIR": cache_dir}
+            subprocess.run(command, check=True, capture_output=True, env=cache)
             return time.perf_counter() - start
 
     with tempfile.TemporaryDirectory() as cache_dir:
@@ -290,15 +293,16 @@ def main() -> None:
             # Alternate the order: back-to-back runs in one process are not equally fast (the second
             # was up to 20% slower here), which would bias the PGG overhead.
             order = variants if repeat % 2 == 0 else variants[::-1]
+            reference = make_args(1.0)  # the defaults, which are CleanRL's
             if args.cleanrl_dir and repeat % 2:
-                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
+                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, reference.total_timesteps, reference.num_envs * reference.num_steps))
             runs = [make_args(*v) for v in order]
             for v, run, timed in zip(order, runs, interleaved_training(module, runs)):
                 sps[(env_id, *v)].append(steady_sps(timed["turns"], run.num_envs * run.num_steps))
                 iteration_times[(env_id, *v)] += timed["turns"][2:-1]  # not the setup, the first iteration, the final checkpoint
                 update_times[(env_id, *v)] += timed["updates"][1:]
             if args.cleanrl_dir and not repeat % 2:
-                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0).total_timesteps))
+                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, reference.total_timesteps, reference.num_envs * reference.num_steps))
 
     for env_id, module, make_args in configs:
         train_args = make_args(1.0)

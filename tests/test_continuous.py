@@ -151,16 +151,48 @@ def test_episodes_are_reported_with_raw_returns():
     assert buf.rewards[0].tolist() == [10.0, 10.0] and buf.rewards[-1].max() < 1.0
 
 
-def test_observation_statistics_match_gymnasium():
+@pytest.mark.parametrize("rows", [1, 7])
+def test_observation_statistics_match_gymnasium_bit_for_bit(rows):
     rng = np.random.default_rng(0)
     norm = pgg.RunningObsNorm(3, clip=10.0)
     reference = gym.wrappers.utils.RunningMeanStd(shape=(3,))
     for _ in range(5):
-        batch = rng.normal(size=(7, 3)) * 5 + 2
+        batch = rng.normal(size=(rows, 3)) * 5 + 2
         norm.update(batch)
         reference.update(batch)
-    np.testing.assert_allclose(norm.mean.numpy(), reference.mean, rtol=1e-12)
-    np.testing.assert_allclose(norm.var.numpy(), reference.var, rtol=1e-12)
+    np.testing.assert_array_equal(norm.mean.numpy(), reference.mean)
+    np.testing.assert_array_equal(norm.var.numpy(), reference.var)
+    assert float(norm.count) == reference.count
+    raw = rng.normal(size=(100, 3)) * 80  # some beyond the clip
+    expected = np.clip((raw - reference.mean) / np.sqrt(reference.var + 1e-8), -10, 10).astype(np.float32)
+    np.testing.assert_array_equal(norm.normalise(raw), expected)
+
+
+def test_reward_scaling_matches_gymnasium_bit_for_bit():
+    """NormalizeClipReward is gymnasium's NormalizeReward then ClipReward in Python floats: the same
+    rewards to the bit, across terminations (which reset the discounted return) and truncations
+    (which carry it over)."""
+
+    def env(ours: bool) -> gym.Env:
+        base = gym.wrappers.ClipAction(gym.make("Hopper-v4", max_episode_steps=30))
+        if ours:
+            return pgg.NormalizeClipReward(base, discount=0.99, clip=1.0)
+        return gym.wrappers.ClipReward(gym.wrappers.NormalizeReward(base, gamma=0.99), -1.0, 1.0)
+
+    envs = [env(ours=True), env(ours=False)]
+    for e in envs:
+        e.reset(seed=0)
+    ends, rewards = {"terminated": 0, "truncated": 0}, []
+    for action in np.random.default_rng(0).uniform(-1, 1, (1000, 3)):
+        (_, reward, terminated, truncated, _), (_, expected, *reference_end, _) = (e.step(action) for e in envs)
+        assert reward == expected and [terminated, truncated] == reference_end
+        rewards.append(reward)
+        if terminated or truncated:
+            ends["terminated" if terminated else "truncated"] += 1
+            for e in envs:
+                e.reset()
+    assert ends["terminated"] > 3 and ends["truncated"] > 3
+    assert max(abs(r) for r in rewards) == 1.0 and min(abs(r) for r in rewards) < 0.5  # clipped and not
 
 
 def test_short_inverted_pendulum_run_learns(tmp_path):

@@ -80,9 +80,8 @@ def test_numpy_rollout_policy_matches_agent(guidance):
     with torch.no_grad():
         cagent.null_obs.normal_()
         cagent.actor_logstd.fill_(-1.0)
-        cagent.obs_norm.update(raw)
         policy = continuous.RolloutPolicy(cagent, guidance)
-        obs = policy.obs_norm.normalise(raw)
+        obs = policy.observe(raw)
         actions, logprobs, values = policy.act(obs, noise)
         mean = cagent.guided_mean(torch.from_numpy(obs), guidance)
         torch.testing.assert_close(torch.from_numpy(actions), mean + cagent.actor_logstd.exp() * torch.from_numpy(noise))
