@@ -216,8 +216,9 @@ def normalise_obs(raw_obs, mean: np.ndarray, var: np.ndarray, epsilon: float, cl
 
 class RunningObsNorm(nn.Module):
     """Running mean/variance of observations, as gymnasium's NormalizeObservation computes them, kept
-    as buffers so that they are saved in the state dict. Updated only by explicit `update` calls
-    (training rollouts); evaluation reads them frozen."""
+    as buffers so that they are saved in the state dict. Only training rollouts update them
+    (`RolloutPolicy.observe`, on numpy views: a dozen torch ops on a few numbers cost more than a
+    MuJoCo step); evaluation reads them frozen."""
 
     def __init__(self, obs_dim: int, clip: float, epsilon: float = 1e-8):
         super().__init__()
@@ -225,11 +226,6 @@ class RunningObsNorm(nn.Module):
         self.register_buffer("mean", torch.zeros(obs_dim, dtype=torch.float64))
         self.register_buffer("var", torch.ones(obs_dim, dtype=torch.float64))
         self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))
-
-    def update(self, batch: np.ndarray) -> None:
-        # numpy on views of the buffers: a dozen torch ops on a few numbers cost more than a MuJoCo
-        # step; the float64 arithmetic is the same, so are the results.
-        update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), batch)
 
     def normalise(self, raw_obs) -> np.ndarray:
         return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
