@@ -13,12 +13,13 @@ Prints, for CartPole-v1 (discrete script) and Hopper-v4 (continuous script):
 The four configurations train side by side in one process, taking turns one iteration at a time
 (`interleaved_training`), in alternating order across repeats. Their SPS leaves out the setup and
 the first iteration (where --compile compiles) of every run; the compile time is measured apart, as
-the extra wall time of a two-iteration run with --compile in a fresh process. This machine class's speed drifts by
-tens of percent over minutes, and ratios of whole runs made seconds apart swung from -25% to +57%;
-the same iteration of the two runs is milliseconds to a second apart. The PGG overhead is the ratio
-of their summed iteration times, and of their summed PPO updates (where PGG's extra compute is),
-with bootstrap intervals over the pairs. SPS figures are each configuration's best repeat; the
-speed-ups (over CleanRL, of --compile) are medians over repeats of the ratio within one repeat.
+the extra wall time of a two-iteration run with --compile in a fresh process. This machine class's
+speed drifts by tens of percent over minutes, and ratios of whole runs made seconds apart swung from
+-25% to +57%; the same iteration of the two runs is milliseconds to a second apart. The PGG overhead
+is the ratio of their summed iteration times, and of their summed PPO updates (where PGG's extra
+compute is), with bootstrap intervals over the pairs. SPS figures are each configuration's best
+repeat; the speed-ups (over CleanRL, of --compile) are medians over repeats of the ratio within one
+repeat.
 
 The speed-up over CleanRL is only meaningful measured in the same run: this machine class's speed
 varies up to 2x with the load of its host. Given a CleanRL checkout and a Python that runs it
@@ -176,13 +177,14 @@ def interleaved_training(module, runs: list) -> list[dict[str, list[float]]]:
     return durations
 
 
-def cleanrl_sps(args: Args, env_id: str, total_timesteps: int, batch_size: int) -> float:
+def cleanrl_sps(args: Args, env_id: str, run) -> float:
     """CleanRL's steps per second after its first iteration, as `steady_sps` counts ours, run with one
-    torch thread like ours."""
+    torch thread like ours, for `run`'s steps and batch (our defaults, which are CleanRL's)."""
+    batch_size = run.num_envs * run.num_steps
     script = Path(args.cleanrl_dir, CLEANRL_SCRIPTS[env_id]).resolve()
     with tempfile.TemporaryDirectory() as tmp:
         out = subprocess.run(
-            [args.cleanrl_python, str(script), "--env-id", env_id, "--total-timesteps", str(total_timesteps),
+            [args.cleanrl_python, str(script), "--env-id", env_id, "--total-timesteps", str(run.total_timesteps),
              "--no-cuda"],
             cwd=tmp, env={**os.environ, "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"},
             capture_output=True, text=True,
@@ -293,16 +295,15 @@ def main() -> None:
             # Alternate the order: back-to-back runs in one process are not equally fast (the second
             # was up to 20% slower here), which would bias the PGG overhead.
             order = variants if repeat % 2 == 0 else variants[::-1]
-            reference = make_args(1.0)  # the defaults, which are CleanRL's
             if args.cleanrl_dir and repeat % 2:
-                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, reference.total_timesteps, reference.num_envs * reference.num_steps))
+                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0)))
             runs = [make_args(*v) for v in order]
             for v, run, timed in zip(order, runs, interleaved_training(module, runs)):
                 sps[(env_id, *v)].append(steady_sps(timed["turns"], run.num_envs * run.num_steps))
                 iteration_times[(env_id, *v)] += timed["turns"][2:-1]  # not the setup, the first iteration, the final checkpoint
                 update_times[(env_id, *v)] += timed["updates"][1:]
             if args.cleanrl_dir and not repeat % 2:
-                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, reference.total_timesteps, reference.num_envs * reference.num_steps))
+                cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0)))
 
     for env_id, module, make_args in configs:
         train_args = make_args(1.0)
