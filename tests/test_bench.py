@@ -1,3 +1,4 @@
+import json
 import subprocess
 import sys
 import threading
@@ -10,6 +11,7 @@ from conftest import ROOT
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import bench_speed  # noqa: E402
+import compare_cleanrl  # noqa: E402
 
 
 def tiny_run(guidance: float, seed: int = 1) -> pgg.Args:
@@ -66,3 +68,78 @@ def test_sweep_checkpoints_are_matched_to_their_env_and_bad_ones_are_one_line_of
     )  # fmt: skip
     assert out.returncode != 0
     assert out.stderr.startswith("error: --sweep-checkpoints") and len(out.stderr.strip().splitlines()) == 1
+
+
+def save_parity_run(folder, impl: str, seed: int, episodes, steps_trained: int, total: int = 1000):
+    """A run of compare_cleanrl as it saves one: (step, return) rows in a CSV and its metadata beside it."""
+    run = compare_cleanrl.Run(impl, seed, folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "total_timesteps": total, "steps_trained": steps_trained, "wall_time_s": 2.0, "sps_reported": 600.0,
+        "script": "ppo_pgg_discrete.py" if impl == "ours" else "ppo.py", "script_sha256": "0" * 64, "cpu": "test cpu",
+        "stack": {"python": "3.11", "torch": "2.13.0", "numpy": "1.26.4", "gymnasium": "0.29.1", "mujoco": None},
+    }  # fmt: skip
+    compare_cleanrl.write_atomic(run.meta, json.dumps(meta))
+    compare_cleanrl.write_atomic(run.csv, "step,return\n" + "".join(f"{s},{r}\n" for s, r in episodes))
+
+
+def test_parity_curve_bins_episodes_by_their_end_and_carries_over_empty_bins():
+    episodes = np.array([(10, 1.0), (25, 3.0), (60, 5.0), (100, 7.0), (110, 1e6)])  # 110: past the range
+    np.testing.assert_array_equal(compare_cleanrl.binned_curve(episodes, end=100, bins=4), [2, 2, 5, 7])
+    leading_gap = compare_cleanrl.binned_curve(np.array([(60, 5.0)]), end=100, bins=4)
+    np.testing.assert_array_equal(leading_gap, [np.nan, np.nan, 5, 5])
+    assert compare_cleanrl.run_scores(episodes, end=100) == (4.0, 7.0)  # whole range; (90, 100]
+
+    mean, half = compare_cleanrl.mean_ci(np.array([[0.0, np.nan], [2.0, 4.0]]))
+    np.testing.assert_allclose(mean, [1.0, 4.0])
+    assert half[0] == pytest.approx(12.706, abs=1e-3) and np.isnan(half[1])  # t_0.975,1 * s / sqrt(2); one value
+
+
+def test_parity_analysis_cuts_at_the_shorter_run_and_welch_tells_a_shift(tmp_path):
+    """CleanRL floors its iterations and we round up: scores count only episodes both could have had."""
+    for seed in (1, 2, 3):
+        episodes = [(100, 10 + seed), (500, 20 + seed), (950, 30 + seed), (1000, 40 + seed)]
+        save_parity_run(tmp_path / "same" / "CartPole-v1", "ours", seed, episodes + [(1010, 1e6)], steps_trained=1024)
+        save_parity_run(tmp_path / "same" / "CartPole-v1", "cleanrl", seed, episodes, steps_trained=1000)
+        shifted = episodes[:2] + [(step, r - 100) for step, r in episodes[2:]]
+        save_parity_run(tmp_path / "shift" / "CartPole-v1", "ours", seed, shifted, steps_trained=1024)
+        save_parity_run(tmp_path / "shift" / "CartPole-v1", "cleanrl", seed, episodes, steps_trained=1000)
+
+    same = compare_cleanrl.compute("CartPole-v1", tmp_path / "same" / "CartPole-v1")
+    assert same.end == 1000
+    np.testing.assert_allclose(same.scores["ours"], [[26, 36], [27, 37], [28, 38]])  # 1010's 1e6 is left out
+    np.testing.assert_allclose(same.scores["cleanrl"], same.scores["ours"])
+    summary = compare_cleanrl.analyse("CartPole-v1", tmp_path / "same")
+    assert "no significant difference at α=0.05" in summary and "490.04 ± 6.12" in summary
+    assert (tmp_path / "same" / "CartPole-v1.png").stat().st_size > 0
+    assert (tmp_path / "same" / "CartPole-v1_summary.md").read_text() == summary
+
+    shift = compare_cleanrl.compute("CartPole-v1", tmp_path / "shift" / "CartPole-v1")
+    verdict = compare_cleanrl.verdict(shift.scores, shift.p_values)
+    assert verdict.startswith("significant difference at α=0.05 in ")
+    assert "mean return over its last tenth (ours lower, p = " in verdict
+
+
+def test_parity_rerun_trains_only_the_runs_not_saved(tmp_path, monkeypatch):
+    folder = tmp_path / "CartPole-v1"
+    save_parity_run(folder, "ours", 1, [(100, 20.0)], steps_trained=1024)
+    trained = []
+    monkeypatch.setattr(compare_cleanrl, "train_one", lambda plan, run, scratch: trained.append(run.name) or run.name)
+    plan = compare_cleanrl.Plan("CartPole-v1", 1000, folder, scripts={}, stacks={})
+    compare_cleanrl.train_missing(plan, seeds=2, workers=1)
+    assert sorted(trained) == ["cleanrl_s1", "cleanrl_s2", "ours_s2"]
+
+    args = compare_cleanrl.Args(env_id="CartPole-v1", total_timesteps=2000, output=str(tmp_path))
+    with pytest.raises(compare_cleanrl.CompareError, match="holds runs of 1,000 steps, not 2,000"):
+        compare_cleanrl.make_plan(args, folder, compare_cleanrl.saved_total(folder))
+
+
+def test_parity_without_cleanrl_python_is_one_line_of_error(tmp_path):
+    (tmp_path / "ppo.py").write_text("")
+    out = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "compare_cleanrl.py"), "--env-id", "CartPole-v1",
+         "--cleanrl-dir", str(tmp_path), "--cleanrl-python", str(tmp_path / "no-python"), "--output", str(tmp_path)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert out.returncode == 2
+    assert out.stderr == f"error: --cleanrl-python {tmp_path / 'no-python'} is not an executable\n"
