@@ -8,21 +8,29 @@ policy
     i.e. softmax((1-guidance)·logits_null + guidance·logits_s).
 
 `guidance` is the PGG strength γ of the paper; the discount factor is `discount`, never "gamma".
-With --guidance 1 --cond-dropout 0 this script is exactly CleanRL's PPO (tests/test_discrete.py).
+With --guidance 1 --cond-dropout 0 this script runs CleanRL's PPO algorithm with CleanRL's defaults;
+what differs from CleanRL's `ppo.py` (iterations rounded up, other random streams, fused Adam,
+numpy rollouts) is listed, one line each, in the README's "What differs from CleanRL", and the
+learning curves are compared with CleanRL's own script in `benchmarks/compare_cleanrl.py`.
 Lines that PGG adds to PPO are marked `# PGG`.
 
     python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1
+    python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1 --resume   # continue a stopped run
 """
 
+import fcntl
+import importlib.metadata
+import importlib.util
 import json
 import math
 import os
+import platform
 import random
 import shutil
 import sys
 import time
-from collections import deque
-from dataclasses import asdict, dataclass
+from collections import defaultdict, deque
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
 import gymnasium as gym
@@ -32,7 +40,10 @@ import torch.nn as nn
 import tyro
 from torch.utils.tensorboard import SummaryWriter
 
-CHECKPOINT_FORMAT_VERSION = 1
+# 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
+CHECKPOINT_FORMAT_VERSION = 2
+READABLE_FORMAT_VERSIONS = (1, 2)
+MAX_GUIDANCE = 1000.0
 
 
 @dataclass
@@ -59,6 +70,12 @@ class Args:
     """directory under which the run directory is created"""
     run_name: str | None = None
     """run directory name; default `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
+    resume: bool = False
+    """continue the run in the run directory from its last checkpoint (start it if it has none)"""
+    overwrite: bool = False
+    """replace a run directory that holds checkpoints of a finished run or of other arguments"""
+    capture_video: bool = False
+    """record videos of the first sub-env's episodes into `{run_dir}/videos` (needs the [video] extra)"""
 
     # Algorithm arguments (CleanRL's discrete PPO defaults)
     env_id: str = "CartPole-v1"
@@ -102,52 +119,157 @@ class Args:
     cond_dropout: float = 0.0
     """probability that a sample's actor input is replaced by the null embedding during updates"""
     checkpoint_interval: int = 100_000
-    """save a checkpoint at the first iteration boundary past each multiple of this many steps"""
+    """save a checkpoint at the first iteration boundary past each multiple of this many steps (at
+    least one batch, num_envs * num_steps)"""
 
 
-def check_args(args: Args) -> str | None:
-    """Returns a one-line description of what is wrong with `args`, or None."""
-    if not math.isfinite(args.guidance) or args.guidance < 0:
-        return f"--guidance must be a finite number >= 0, got {args.guidance}"
-    if not 0.0 <= args.cond_dropout <= 1.0:
-        return f"--cond-dropout must lie in [0, 1], got {args.cond_dropout}"
-    if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
-        return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
-    if args.checkpoint_interval <= 0:
-        return f"--checkpoint-interval must be positive, got {args.checkpoint_interval}"
-    if args.total_timesteps <= 0 or args.num_envs <= 0 or args.num_steps <= 0:
-        return "--total-timesteps, --num-envs and --num-steps must be positive"
-    if args.num_minibatches <= 0 or (args.num_envs * args.num_steps) % args.num_minibatches:
-        return f"--num-minibatches must divide num_envs * num_steps = {args.num_envs * args.num_steps}"
-    try:
-        env = gym.make(args.env_id)
-    except gym.error.Error as e:
-        return f"cannot make environment {args.env_id!r}: {e}"
-    action_space = env.action_space
-    env.close()
-    if not isinstance(action_space, gym.spaces.Discrete):
-        return f"{args.env_id} has a {type(action_space).__name__} action space; this script needs Discrete (use ppo_pgg_continuous.py)"
+# Arguments that change where and how a run is recorded or how fast it runs, never what it learns
+# (--compile, the thread count and deterministic kernels change float rounding only). The sweep keys
+# a training configuration on all the other arguments except the seed.
+RUN_ONLY_ARGS = frozenset({
+    "exp_name", "torch_deterministic", "torch_threads", "compile", "track", "wandb_project_name",
+    "wandb_entity", "output_dir", "run_name", "resume", "overwrite", "capture_video", "checkpoint_interval",
+})  # fmt: skip
+
+
+def guidance_error(value: float, flag: str = "--guidance") -> str | None:
+    """The one rule for a guidance strength, in training and in the sweep's --gammas."""
+    if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
+        return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
     return None
 
 
-def make_env(env_id: str):
+def check_args(args: Args) -> str | None:
+    """Returns a one-line description of what is wrong with `args`, or None. Touches no file."""
+    rules = {  # NaN fails every comparison
+        "learning_rate": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+        "discount": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+        "gae_lambda": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+        "clip_coef": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+        "ent_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
+        "vf_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
+        "max_grad_norm": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+        "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
+        "cond_dropout": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+        "total_timesteps": (lambda v: v > 0, "positive"),
+        "num_envs": (lambda v: v > 0, "positive"),
+        "num_steps": (lambda v: v > 0, "positive"),
+        "update_epochs": (lambda v: v > 0, "positive"),
+        "torch_threads": (lambda v: v > 0, "positive"),
+    }
+    for name, (holds, requirement) in rules.items():
+        if not holds(getattr(args, name)):
+            return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
+    if error := guidance_error(args.guidance):
+        return error
+    batch_size = args.num_envs * args.num_steps
+    if args.num_minibatches <= 0 or batch_size % args.num_minibatches:
+        return f"--num-minibatches must divide num_envs * num_steps = {batch_size}"
+    if args.checkpoint_interval < batch_size:
+        return f"--checkpoint-interval must be at least one batch, num_envs * num_steps = {batch_size}"
+    if args.resume and args.overwrite:
+        return "--resume and --overwrite exclude each other"
+    if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
+        return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
+    if args.track and importlib.util.find_spec("wandb") is None:
+        return "--track needs Weights and Biases: pip install wandb"
+    try:
+        env = gym.make(args.env_id, render_mode="rgb_array" if args.capture_video else None)
+    except gym.error.Error as e:
+        return f"cannot make environment {args.env_id!r}: {e}"
+    action_space = env.action_space
+    if args.capture_video:
+        error = video_error(env)
+    env.close()
+    if not isinstance(action_space, gym.spaces.Discrete):
+        return f"{args.env_id} has a {type(action_space).__name__} action space; this script needs Discrete (use ppo_pgg_continuous.py)"
+    return error if args.capture_video else None
+
+
+def video_error(env: gym.Env) -> str | None:
+    """Why this env cannot be recorded here (a missing package or rendering backend), or None."""
+    try:
+        import moviepy  # noqa: F401  (gymnasium's RecordVideo writes with it)
+
+        env.reset(seed=0)
+        if env.render() is None:
+            return f"{env.spec.id} renders no frames"
+    except ImportError as e:
+        return f"--capture-video needs the [video] extra (pip install -e '.[video]'): {e}"
+    except Exception as e:  # rendering backends fail with anything from OpenGL, pygame or MuJoCo
+        return f"--capture-video cannot render {env.spec.id} here ({type(e).__name__}: {e})"
+    return None
+
+
+def make_env(env_id: str, video_dir: Path | None = None):
     def thunk():
-        return gym.make(env_id)
+        if video_dir is None:
+            return gym.make(env_id)
+        env = gym.make(env_id, render_mode="rgb_array")
+        return gym.wrappers.RecordVideo(env, str(video_dir), disable_logger=True)
 
     return thunk
 
 
-def make_vector_env(env_id: str, num_envs: int, seed: int) -> gym.vector.VectorEnv:
+def make_vector_env(env_id: str, num_envs: int, seed: int, video_dir: Path | None = None) -> gym.vector.VectorEnv:
     """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE
     below relies on): the observation returned with done=True is the next episode's first one.
     Episode statistics are recorded per sub-env, as in CleanRL: gymnasium 1.4's vector wrapper for
-    them cost ~1.5 µs more per env step, about 2% of training here."""
+    them cost ~1.5 µs more per env step, about 2% of training here. With `video_dir`, the first
+    sub-env's episodes are recorded there (on CleanRL's schedule: episodes 0, 1, 8, 27, ..., 1000, 2000, ...)."""
     envs = gym.vector.SyncVectorEnv(
-        [lambda: gym.wrappers.RecordEpisodeStatistics(make_env(env_id)()) for _ in range(num_envs)],
+        [
+            lambda i=i: gym.wrappers.RecordEpisodeStatistics(make_env(env_id, video_dir if i == 0 else None)())
+            for i in range(num_envs)
+        ],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     envs.action_space.seed(seed)
     return envs
+
+
+# What a sub-env carries from one step to the next, besides its RNG: wrapper counters (time limit,
+# episode statistics) and a classic-control task's physical state. Saved with a checkpoint so that a
+# resumed run continues the very episodes it was in.
+ENV_STATE_ATTRIBUTES = ("_elapsed_steps", "_has_reset", "episode_returns", "episode_lengths", "state", "steps_beyond_terminated")
+
+
+def wrapper_chain(env: gym.Env):
+    while True:
+        yield env
+        if not isinstance(env, gym.Wrapper):
+            return
+        env = env.env
+
+
+def pickle_free(value):
+    """`value` as a checkpoint can hold it: arrays as tensors, numpy scalars as Python numbers."""
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(value.copy())
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def env_state(envs) -> list[dict] | None:
+    """The state of every sub-env as plain values and tensors (pickle-free), or None for a task whose
+    state this cannot capture (then a resumed run starts fresh episodes)."""
+    states = []
+    for env in envs.envs:
+        if not hasattr(env.unwrapped, "state"):
+            return None
+        layers = [
+            {name: pickle_free(value) for name, value in vars(layer).items() if name in ENV_STATE_ATTRIBUTES}
+            for layer in wrapper_chain(env)
+        ]
+        states.append({"layers": layers, "rng": env.unwrapped.np_random.bit_generator.state})
+    return states
+
+
+def restore_env_state(envs, states: list[dict]) -> None:
+    for env, state in zip(envs.envs, states):
+        for layer, saved in zip(wrapper_chain(env), state["layers"]):
+            for name, value in saved.items():
+                setattr(layer, name, value.numpy().copy() if isinstance(value, torch.Tensor) else value)
+        env.unwrapped.np_random.bit_generator.state = state["rng"]
 
 
 def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
@@ -281,10 +403,11 @@ class Rollout:
         )
 
 
-def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollout, on_episode):
+def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollout, on_episode, global_step: int):
     """Fills `buf` with num_steps transitions from the guided policy and returns the (obs, done)
-    numpy arrays to start the next rollout from. `on_episode(return, length)` is called per
-    finished episode."""
+    numpy arrays to start the next rollout from. `on_episode(return, length, step)` is called per
+    finished episode with the global step at which it ended (CleanRL's logging step); `global_step`
+    is the step count before this rollout."""
     # Numpy views of the buffers: a write costs a fraction of a torch indexing call.
     obs_buf, dones_buf, actions_buf, logprobs_buf, values_buf, rewards_buf = (
         t.numpy() for t in (buf.obs, buf.dones, buf.actions, buf.logprobs, buf.values, buf.rewards)
@@ -303,7 +426,7 @@ def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollo
         if "final_info" in infos:  # a sub-env ended an episode; its last step's info is kept here
             ended = infos["final_info"]
             for i in np.flatnonzero(ended["_episode"]):
-                on_episode(float(ended["episode"]["r"][i]), int(ended["episode"]["l"][i]))
+                on_episode(float(ended["episode"]["r"][i]), int(ended["episode"]["l"][i]), global_step + (step + 1) * len(next_obs))
     return next_obs, next_done
 
 
@@ -356,10 +479,26 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     ratio = logratio.exp()
 
     with torch.no_grad():
+        # PGG: a dropped row compares pi(a|null) with the pi_hat(a|s) that acted, so its ratio does not
+        # start at 1; the KL estimates and the clip fraction describe the policy's own change, i.e. the
+        # kept rows. Masked means, not boolean indexing: the compiled loss keeps static shapes.
+        kept = torch.ones_like(ratio) if drop_mask is None else (~drop_mask).float()
+        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # noqa: E731
         # http://joschu.net/blog/kl-approx.html
-        old_approx_kl = (-logratio).mean()
-        approx_kl = ((ratio - 1) - logratio).mean()
-        clipfrac = ((ratio - 1.0).abs() > args.clip_coef).float().mean()
+        old_approx_kl = kept_mean(-logratio)
+        approx_kl = kept_mean((ratio - 1) - logratio)
+        clipped = ((ratio - 1.0).abs() > args.clip_coef).float()
+        clipfrac = kept_mean(clipped)
+        dropped_stats = {}
+        if drop_mask is not None:  # PGG
+            dropped = 1.0 - kept
+            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # noqa: E731
+            dropped_stats = {
+                "pgg/dropped_fraction": dropped.mean(),
+                "pgg/dropped_ratio_mean": dropped_mean(ratio),
+                "pgg/dropped_abs_logratio": dropped_mean(logratio.abs()),
+                "pgg/dropped_clipfrac": dropped_mean(clipped),
+            }
 
     mb_advantages = batch["advantages"][mb_inds]
     if args.norm_adv:
@@ -388,6 +527,7 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
         "losses/old_approx_kl": old_approx_kl,
         "losses/approx_kl": approx_kl,
         "losses/clipfrac": clipfrac,
+        **dropped_stats,
     }
 
 
@@ -404,7 +544,7 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, 
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.num_minibatches
 
-    clipfracs = []
+    per_minibatch = defaultdict(list)  # averaged over every minibatch, as CleanRL does the clip fraction
     for _ in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
@@ -412,7 +552,8 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, 
             if args.cond_dropout > 0:  # PGG: conditioning dropout
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout
             loss, stats = loss_fn(agent, batch, b_inds[start : start + minibatch_size], drop_mask, args)
-            clipfracs.append(stats["losses/clipfrac"])
+            for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):
+                per_minibatch[key].append(stats[key])
 
             optimizer.zero_grad(set_to_none=False)  # in place: see flatten_parameters
             loss.backward()
@@ -425,7 +566,7 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, 
     y_pred, y_true = batch["values"].numpy(), batch["returns"].numpy()
     var_y = np.var(y_true)
     stats = {key: value.item() for key, value in stats.items()}
-    stats["losses/clipfrac"] = torch.stack(clipfracs).mean().item()
+    stats.update({key: torch.stack(values).mean().item() for key, values in per_minibatch.items()})
     stats["losses/explained_variance"] = float("nan") if var_y == 0 else float(1 - np.var(y_true - y_pred) / var_y)
     return stats
 
@@ -452,8 +593,36 @@ def checkpoint_path(run_dir: Path, mark: int) -> Path:
     return run_dir / "checkpoints" / f"step_{mark:09d}.pt"
 
 
-def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark: int, envs) -> None:
-    """Self-contained, pickle-free checkpoint (loads with weights_only=True), written atomically."""
+def package_versions() -> dict[str, str | None]:
+    """The software stack a checkpoint was trained on (the sweep keeps MuJoCo versions apart)."""
+
+    def version(package: str) -> str | None:
+        try:
+            return importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    return {"python": platform.python_version(), **{p: version(p) for p in ("torch", "numpy", "gymnasium", "mujoco")}}
+
+
+def rng_state() -> dict:
+    """torch's, numpy's and Python's global generators, pickle-free."""
+    numpy_state = np.random.get_state(legacy=False)
+    numpy_state["state"]["key"] = torch.from_numpy(numpy_state["state"]["key"].astype(np.int64))
+    return {"torch": torch.get_rng_state(), "numpy": numpy_state, "python": random.getstate()}
+
+
+def set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    numpy_state = state["numpy"]
+    numpy_state["state"]["key"] = numpy_state["state"]["key"].numpy().astype(np.uint32)
+    np.random.set_state(numpy_state)
+    random.setstate(state["python"])
+
+
+def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark: int, envs, resume: dict) -> None:
+    """Self-contained, pickle-free checkpoint (loads with weights_only=True), written atomically.
+    `resume` holds what continuing the run needs besides the model (see `train`)."""
     payload = {
         "format_version": CHECKPOINT_FORMAT_VERSION,
         "script": "ppo_pgg_discrete",
@@ -464,7 +633,9 @@ def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark
         "global_step": int(global_step),
         "step_mark": int(mark),
         "args": asdict(args),
+        "versions": package_versions(),
         "model": agent.state_dict(),
+        "resume": resume,
     }
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
@@ -479,9 +650,9 @@ def load_checkpoint(path) -> tuple[Agent, dict]:
 
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
-    """The agent, in eval mode, of an already loaded checkpoint dict."""
-    if ckpt.get("format_version") != CHECKPOINT_FORMAT_VERSION or ckpt.get("action_space") != "discrete":
-        raise ValueError(f"{source} is not a discrete PGG checkpoint of format {CHECKPOINT_FORMAT_VERSION}")
+    """The agent, in eval mode, of an already loaded checkpoint dict (of any readable format)."""
+    if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != "discrete":
+        raise ValueError(f"{source} is not a discrete PGG checkpoint of format {READABLE_FORMAT_VERSIONS}")
     agent = Agent(ckpt["obs_dim"], ckpt["n_actions"])
     agent.load_state_dict(ckpt["model"])
     return agent.eval()
@@ -491,22 +662,134 @@ def default_run_name(args: Args) -> str:
     return f"{args.env_id}__{args.exp_name}__g{args.guidance:g}__p{args.cond_dropout:g}__s{args.seed}"
 
 
+class RunDirError(Exception):
+    """A run directory this run must not write to; the message is one line that says what to do."""
+
+
+HELD_LOCKS: dict[Path, object] = {}  # run directory -> its open lock file, while this process trains there
+
+
+def lock_directory(directory: Path):
+    """An exclusive lock on `directory` for as long as the returned file stays open. The kernel drops
+    it when its holder dies, however it dies, so no stale lock outlives a killed run."""
+    handle = open(directory / ".lock", "a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip() or "unknown"
+        handle.close()
+        raise RunDirError(f"{directory} is in use by another process (pid {holder}); wait for it or stop it") from None
+    handle.truncate(0)
+    handle.write(f"{os.getpid()}\n")
+    handle.flush()
+    return handle
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    found = sorted((run_dir / "checkpoints").glob("step_*.pt"))
+    return found[-1] if found else None
+
+
+def training_arguments(values: dict) -> dict:
+    """The arguments that decide what a run learns, those an older checkpoint lacks at their defaults."""
+    defaults = asdict(Args())
+    return {name: values.get(name, default) for name, default in defaults.items() if name not in RUN_ONLY_ARGS}
+
+
+def check_continuable(run_dir: Path, latest: Path, args: Args) -> None:
+    """Raises RunDirError unless this run may continue the one whose last checkpoint is `latest`."""
+    try:
+        ckpt = torch.load(latest, map_location="cpu", weights_only=True)
+    except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
+        raise RunDirError(f"cannot read {latest} ({type(e).__name__}); pass --overwrite to start over") from None
+    recorded, wanted = training_arguments(ckpt.get("args", {})), training_arguments(asdict(args))
+    differing = [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
+    if differing:
+        raise RunDirError(
+            f"{run_dir} holds a run with other arguments ({', '.join(differing)}): "
+            "choose another --run-name, or pass --overwrite to replace it"
+        )
+    if not args.resume:
+        finished = checkpoint_path(run_dir, args.total_timesteps).exists()
+        state = "a finished run" if finished else f"an unfinished run (last checkpoint {latest.name})"
+        how = "" if finished else "pass --resume to continue it, or "
+        raise RunDirError(f"{run_dir} holds {state}: {how}pass --overwrite to train it again from scratch")
+    if "resume" not in ckpt:
+        raise RunDirError(f"{latest} predates resumable checkpoints: pass --overwrite to start over")
+
+
 def prepare_run_dir(args: Args) -> Path:
-    """Creates the run directory, clearing what an earlier run of the same name left (a rerun starts
-    cleanly), and writes args.json. Raises OSError if it is not writable."""
+    """Creates and locks the run directory and writes args.json. A directory that holds checkpoints is
+    only continued (--resume, same training arguments) or replaced (--overwrite), and every check runs
+    before anything is deleted. Raises RunDirError (one line) or OSError (not writable)."""
     run_dir = Path(args.output_dir) / (args.run_name or default_run_name(args))
     run_dir.mkdir(parents=True, exist_ok=True)
-    shutil.rmtree(run_dir / "checkpoints", ignore_errors=True)
-    for stale in run_dir.glob("events.out.tfevents.*"):
-        stale.unlink()
+    if run_dir not in HELD_LOCKS:
+        HELD_LOCKS[run_dir] = lock_directory(run_dir)
+    latest = latest_checkpoint(run_dir)
+    if latest is not None and not args.overwrite:
+        check_continuable(run_dir, latest, args)
+    if not (args.resume and latest is not None):
+        for stale in ("checkpoints", "videos"):
+            shutil.rmtree(run_dir / stale, ignore_errors=True)
+        for stale in run_dir.glob("events.out.tfevents.*"):
+            stale.unlink()
     tmp = run_dir / "args.json.tmp"
     tmp.write_text(json.dumps(asdict(args), indent=2))
     os.replace(tmp, run_dir / "args.json")
     return run_dir
 
 
+class ProgressReport:
+    """Steps done, SPS, recent mean return and ETA: a live bar (rich) when stdout is a terminal, else
+    a plain line every `interval` seconds, for the logs of the launcher and of Slurm."""
+
+    def __init__(self, total_steps: int, first_step: int, interval: float = 30.0):
+        self.total, self.first_step, self.interval = total_steps, first_step, interval
+        self.start = self.last_line = time.time()
+        self.bar = None
+        if sys.stdout.isatty():
+            from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn
+
+            self.bar = Progress(TextColumn("training"), BarColumn(), TaskProgressColumn(), TextColumn("{task.fields[line]}"))
+            self.task = self.bar.add_task("", total=total_steps, completed=first_step, line="")
+            self.bar.start()
+
+    def update(self, global_step: int, recent_returns) -> int:
+        """Reports `global_step`; returns the SPS of this process so far."""
+        now = time.time()
+        sps = int((global_step - self.first_step) / max(now - self.start, 1e-9))
+        mean_return = f"{np.mean(recent_returns):.1f}" if recent_returns else "-"
+        eta = (self.total - global_step) / max(sps, 1)
+        line = f"{global_step:,}/{self.total:,} steps  {sps:,} SPS  return(last 20) {mean_return}  ETA {eta / 60:.0f}m{eta % 60:02.0f}s"
+        if self.bar is not None:
+            self.bar.update(self.task, completed=global_step, line=line)
+        elif now - self.last_line >= self.interval:
+            self.last_line = now
+            print(line, flush=True)
+        return sps
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+
+
 def train(args: Args, run_dir: Path) -> None:
-    """Trains one agent, writing TensorBoard events and checkpoints into `run_dir`."""
+    """Trains one agent, writing TensorBoard events and checkpoints into `run_dir` (prepared by
+    `prepare_run_dir`). With --resume it continues from the last checkpoint bit for bit: the checkpoint
+    holds the optimizer, the sub-envs mid-episode, the next observation and every RNG state."""
+    try:
+        latest = latest_checkpoint(run_dir) if args.resume else None
+        resumed = torch.load(latest, map_location="cpu", weights_only=True) if latest else None
+        _train(args, run_dir, resumed)
+    finally:
+        lock = HELD_LOCKS.pop(run_dir, None)
+        if lock is not None:
+            lock.close()
+
+
+def _train(args: Args, run_dir: Path, resumed: dict | None) -> None:
     if args.track:
         import wandb
 
@@ -518,7 +801,8 @@ def train(args: Args, run_dir: Path) -> None:
             name=run_dir.name,
             save_code=True,
         )
-    writer = SummaryWriter(str(run_dir))
+    # Events written after the checkpoint by the run that stopped are dropped by TensorBoard's readers.
+    writer = SummaryWriter(str(run_dir), purge_step=resumed["global_step"] + 1 if resumed else None)
     writer.add_text(
         "hyperparameters",
         "|param|value|\n|-|-|\n%s" % "\n".join(f"|{key}|{value}|" for key, value in asdict(args).items()),
@@ -531,7 +815,7 @@ def train(args: Args, run_dir: Path) -> None:
     torch.use_deterministic_algorithms(args.torch_deterministic)
     torch.set_num_threads(args.torch_threads)
 
-    envs = make_vector_env(args.env_id, args.num_envs, args.seed)
+    envs = make_vector_env(args.env_id, args.num_envs, args.seed, run_dir / "videos" if args.capture_video else None)
     obs_dim = envs.single_observation_space.shape[0]
     agent = Agent(obs_dim, envs.single_action_space.n)
     # fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
@@ -548,47 +832,69 @@ def train(args: Args, run_dir: Path) -> None:
     batch_size = args.num_envs * args.num_steps
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
-    marks = deque(checkpoint_marks(args.total_timesteps, args.checkpoint_interval))
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim)
     recent_returns = deque(maxlen=20)
-    global_step = 0
 
-    def on_episode(episodic_return: float, episodic_length: int):
+    def on_episode(episodic_return: float, episodic_length: int, step: int):
         recent_returns.append(episodic_return)
-        writer.add_scalar("charts/episodic_return", episodic_return, global_step)
-        writer.add_scalar("charts/episodic_length", episodic_length, global_step)
+        writer.add_scalar("charts/episodic_return", episodic_return, step)
+        writer.add_scalar("charts/episodic_length", episodic_length, step)
 
-    start_time = time.time()
     obs, _ = envs.reset(seed=args.seed)
     next_obs = obs.astype(np.float32)
     next_done = np.zeros(args.num_envs, dtype=np.float32)
+    first_iteration, global_step = 1, 0
+    if resumed is not None:
+        state = resumed["resume"]
+        agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
+        optimizer.load_state_dict(state["optimizer"])
+        if state["envs"] is not None:
+            restore_env_state(envs, state["envs"])
+            next_obs, next_done = state["next_obs"].numpy().copy(), state["next_done"].numpy().copy()
+        else:  # a task whose state a checkpoint cannot hold: fresh episodes, a statistically equal run
+            obs, _ = envs.reset(seed=args.seed + state["iteration"])
+            next_obs = obs.astype(np.float32)
+        set_rng_state(state["rng"])
+        first_iteration, global_step = state["iteration"] + 1, resumed["global_step"]
+        print(f"resuming from {latest_checkpoint(run_dir)} at global_step={global_step}", flush=True)
+    marks = deque(mark for mark in checkpoint_marks(args.total_timesteps, args.checkpoint_interval) if mark > global_step)
+    progress = ProgressReport(num_iterations * batch_size, global_step)
 
-    for iteration in range(1, num_iterations + 1):
-        if args.anneal_lr:
-            optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
+    try:
+        for iteration in range(first_iteration, num_iterations + 1):
+            if args.anneal_lr:
+                optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
 
-        policy = RolloutPolicy(agent, args.guidance)
-        next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, on_episode)
-        global_step += batch_size
-        next_value = policy.value(next_obs)
-        advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
+            policy = RolloutPolicy(agent, args.guidance)
+            next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, on_episode, global_step)
+            global_step += batch_size
+            next_value = policy.value(next_obs)
+            advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
-        stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
-        stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))
-        stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
-        sps = int(global_step / (time.time() - start_time))
-        stats["charts/SPS"] = sps
-        for key, value in stats.items():
-            writer.add_scalar(key, value, global_step)
+            stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
+            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))
+            stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
+            stats["charts/SPS"] = sps = progress.update(global_step, recent_returns)
+            for key, value in stats.items():
+                writer.add_scalar(key, value, global_step)
 
-        while marks and global_step >= marks[0]:
-            mark = marks.popleft()
-            save_checkpoint(checkpoint_path(run_dir, mark), agent, args, global_step, mark, envs)
-            mean_return = np.mean(recent_returns) if recent_returns else float("nan")
-            print(f"global_step={global_step} mark={mark} mean_return(last 20)={mean_return:.1f} SPS={sps}", flush=True)
-
-    envs.close()
-    writer.close()
+            while marks and global_step >= marks[0]:
+                mark = marks.popleft()
+                resume = {
+                    "iteration": iteration,
+                    "optimizer": optimizer.state_dict(),
+                    "envs": env_state(envs),
+                    "next_obs": torch.from_numpy(next_obs.copy()),
+                    "next_done": torch.from_numpy(next_done.copy()),
+                    "rng": rng_state(),
+                }
+                save_checkpoint(checkpoint_path(run_dir, mark), agent, args, global_step, mark, envs, resume)
+                mean_return = np.mean(recent_returns) if recent_returns else float("nan")
+                print(f"global_step={global_step} mark={mark} mean_return(last 20)={mean_return:.1f} SPS={sps}", flush=True)
+    finally:
+        progress.close()
+        envs.close()
+        writer.close()
     if args.track:
         wandb.finish()
 
@@ -599,18 +905,21 @@ def main() -> None:
     if error is None:
         try:
             run_dir = prepare_run_dir(args)
+        except RunDirError as e:
+            error = str(e)
         except OSError as e:
             error = f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
-    if error is None and args.track:
-        try:
-            import wandb  # noqa: F401
-        except ImportError:
-            error = "--track needs Weights and Biases: pip install wandb"
     if error is not None:
         print(f"error: {error}", file=sys.stderr)
         sys.exit(2)
     print(f"run directory: {run_dir}")
-    train(args, run_dir)
+    try:
+        train(args, run_dir)
+    except KeyboardInterrupt:
+        latest = latest_checkpoint(run_dir)
+        kept = f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
+        print(f"interrupted; {run_dir}: {kept}", file=sys.stderr)
+        sys.exit(130)
 
 
 if __name__ == "__main__":

@@ -135,20 +135,60 @@ def test_checkpoint_carries_observation_statistics(tmp_path):
     assert torch.equal(torch.tensor(json.loads(out.stdout)).float(), in_process)
 
 
-def test_episodes_are_reported_with_raw_returns():
+def test_episodes_are_reported_with_raw_returns_at_the_step_they_end():
     """Episode statistics come from each sub-env's wrapper (under infos["final_info"] with same-step
-    autoreset), recorded before reward normalisation: InvertedPendulum pays 1 per step."""
-    envs = pgg.make_vector_env("InvertedPendulum-v4", 2, seed=0, discount=0.99, reward_clip=10.0)
+    autoreset), recorded before reward normalisation: InvertedPendulum pays 1 per step. Each episode
+    is logged at the global step at which it ended, as CleanRL does; with one sub-env that is the
+    running sum of the episode lengths."""
+    envs = pgg.make_vector_env("InvertedPendulum-v4", 1, seed=0, discount=0.99, reward_clip=10.0)
     obs, _ = envs.reset(seed=0)
-    buf = pgg.Rollout.empty(200, 2, 4, 1)
-    episodes = []
-    pgg.collect_rollout(
-        pgg.RolloutPolicy(pgg.Agent(4, 1), 1.0), envs, obs, np.zeros(2, np.float32), buf, lambda r, l: episodes.append((r, l))
-    )
-    assert len(episodes) == int(buf.dones.sum()) > 10
-    assert all(episodic_return == length for episodic_return, length in episodes)
+    buf = pgg.Rollout.empty(200, 1, 4, 1)
+    torch.manual_seed(0)
+    policy, episodes = pgg.RolloutPolicy(pgg.Agent(4, 1), 1.0), []
+    _, next_done = pgg.collect_rollout(
+        policy, envs, policy.observe(obs), np.zeros(1, np.float32), buf,
+        lambda r, l, step: episodes.append((r, l, step)), global_step=4096,
+    )  # fmt: skip
+    returns, lengths, steps = map(np.array, zip(*episodes))
+    assert len(episodes) == int(buf.dones[1:].sum() + next_done.sum()) > 10
+    assert (returns == lengths).all()
+    assert (steps == 4096 + np.cumsum(lengths)).all()
     # The rollout's rewards are normalised (reward / std of the discounted return) and clipped.
-    assert buf.rewards[0].tolist() == [10.0, 10.0] and buf.rewards[-1].max() < 1.0
+    assert buf.rewards[0].tolist() == [10.0] and buf.rewards[-1].max() < 1.0
+
+
+def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
+    """The agent's statistics equal those of gymnasium's NormalizeObservation on the sub-env (CleanRL's
+    wrapper), stepped with the same actions: every observation a reset or step returns, terminal ones
+    included, in the same order. Hopper with a 25-step time limit ends episodes both ways."""
+    short = lambda env_id, video_dir=None: lambda: gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25))  # noqa: E731
+    monkeypatch.setattr(pgg, "make_env", short)
+    envs = pgg.make_vector_env("Hopper-v4", 1, seed=3, discount=0.99, reward_clip=10.0)
+    agent = pgg.Agent(11, 3)
+    policy = pgg.RolloutPolicy(agent, 1.0)
+    buf = pgg.Rollout.empty(400, 1, 11, 3)
+    raw_obs, _ = envs.reset(seed=3)
+    next_obs, next_done = pgg.collect_rollout(policy, envs, policy.observe(raw_obs), np.zeros(1, np.float32), buf, lambda *_: None, 0)
+
+    def cleanrl_wrapper():
+        wrapper = gym.wrappers.NormalizeObservation(gym.wrappers.ClipAction(short("Hopper-v4")()))
+        # gymnasium 1.4 starts its statistics as float32 (the normalised space's dtype), which rounds
+        # the first update's var * count; gymnasium 0.29, CleanRL's, keeps them in float64 throughout.
+        wrapper.obs_rms = gym.wrappers.utils.RunningMeanStd(shape=(11,))
+        return wrapper
+
+    reference = gym.vector.SyncVectorEnv([cleanrl_wrapper], autoreset_mode=gym.vector.AutoresetMode.SAME_STEP)
+    reference.reset(seed=3)
+    terminated = truncated = 0
+    for action in buf.actions.numpy():
+        _, _, terms, truncs, _ = reference.step(action)
+        terminated, truncated = terminated + int(terms[0]), truncated + int(truncs[0] and not terms[0])
+    assert terminated > 0 and truncated > 0
+    stats = reference.envs[0].obs_rms
+    # Elementwise float64 operations in the same order: equal bits by construction, on any CPU.
+    assert float(agent.obs_norm.count) == stats.count == 1e-4 + 1 + 400 + terminated + truncated
+    np.testing.assert_array_equal(agent.obs_norm.mean.numpy(), stats.mean)
+    np.testing.assert_array_equal(agent.obs_norm.var.numpy(), stats.var)
 
 
 @pytest.mark.parametrize("rows", [1, 7])
@@ -220,10 +260,13 @@ def test_paper_task_steps_through_env_factory(env_id):
     envs = pgg.make_vector_env(env_id, 2, seed=0, discount=0.99, reward_clip=10.0)
     obs, _ = envs.reset(seed=0)
     agent = pgg.Agent(obs.shape[1], envs.single_action_space.shape[0])
+    policy = pgg.RolloutPolicy(agent, 1.1)
     buf = pgg.Rollout.empty(300, 2, obs.shape[1], envs.single_action_space.shape[0])
-    pgg.collect_rollout(pgg.RolloutPolicy(agent, 1.1), envs, obs, np.zeros(2, np.float32), buf, lambda r, l: None)
+    _, next_done = pgg.collect_rollout(policy, envs, policy.observe(obs), np.zeros(2, np.float32), buf, lambda *_: None, 0)
     assert torch.isfinite(buf.obs).all() and buf.rewards.abs().max() <= 10.0
-    assert float(agent.obs_norm.count) == pytest.approx(600, abs=1)
+    # First observations, one per step and sub-env, and each episode's last one.
+    episode_ends = int(buf.dones[1:].sum() + next_done.sum())
+    assert float(agent.obs_norm.count) == pytest.approx(1e-4 + 2 + 600 + episode_ends)
 
 
 def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls):

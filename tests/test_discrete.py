@@ -185,14 +185,15 @@ class CountdownEnv(gym.Env):
 
 def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     lengths = [3, 5]
-    monkeypatch.setattr(pgg, "make_env", lambda env_id: lambda: CountdownEnv(lengths.pop(0)))
+    monkeypatch.setattr(pgg, "make_env", lambda env_id, video_dir=None: lambda: CountdownEnv(lengths.pop(0)))
     envs = pgg.make_vector_env("unused", 2, seed=0)
     obs, _ = envs.reset(seed=0)
     buf = pgg.Rollout.empty(7, 2, 2)
     episodes = []
     next_obs, next_done = pgg.collect_rollout(
-        pgg.RolloutPolicy(pgg.Agent(2, 2), 1.0), envs, obs, np.zeros(2, np.float32), buf, lambda r, l: episodes.append((r, l))
-    )
+        pgg.RolloutPolicy(pgg.Agent(2, 2), 1.0), envs, obs, np.zeros(2, np.float32), buf,
+        lambda r, l, step: episodes.append((r, l, step)), global_step=100,
+    )  # fmt: skip
     # env 0: episodes of 3 steps. Every stored obs is a pre-action state; a terminal obs never is.
     assert buf.obs[:, 0].tolist() == [[0, 0], [0, 1], [0, 2], [1, 0], [1, 1], [1, 2], [2, 0]]
     assert buf.dones[:, 0].tolist() == [0, 0, 0, 1, 0, 0, 1]
@@ -200,7 +201,9 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     assert buf.obs[:, 1].tolist() == [[0, 0], [0, 1], [0, 2], [0, 3], [0, 4], [1, 0], [1, 1]]
     assert buf.dones[:, 1].tolist() == [0, 0, 0, 0, 0, 1, 0]
     assert next_obs.tolist() == [[2, 1], [1, 2]] and next_done.tolist() == [0, 0]
-    assert sorted(episodes) == [(6.0, 3), (6.0, 3), (15.0, 5)]
+    # Each episode is logged at the global step it ended at (CleanRL's), 2 env steps per vector step:
+    # env 0's end after vector steps 3 and 6, env 1's after step 5.
+    assert sorted(episodes) == [(6.0, 3, 106), (6.0, 3, 112), (15.0, 5, 110)]
     # GAE must not bootstrap across a boundary: with zero values the advantage is the in-episode return.
     buf.values.zero_()
     advantages, _ = pgg.compute_gae(buf, np.zeros(2, np.float32), next_done, discount=1.0, gae_lambda=1.0)

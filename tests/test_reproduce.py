@@ -80,7 +80,7 @@ def test_failed_run_is_reported_and_others_finish(tmp_path, monkeypatch):
     args = tiny_args(tmp_path, "failing", variants=("ppo",))
     assert reproduce.reproduce(args) == 1
     log = tmp_path / "failing" / "runs" / "logs" / "CartPole-v1__ppo__s2.log"
-    assert "--guidance must be a finite number" in log.read_text()
+    assert "--guidance must be a number in [0, 1000]" in log.read_text()
     assert (tmp_path / "failing" / "runs" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000002048.pt").exists()
 
 
