@@ -1,11 +1,14 @@
 import csv
+import math
 import re
 import subprocess
 import sys
 
+import matplotlib
+import numpy as np
 import pytest
+from scipy import stats
 
-import eval_gamma_sweep as sweep
 import plot_results as plots
 from conftest import ROOT
 
@@ -28,24 +31,62 @@ SEED_MEANS = {
 DISAGREEING = {("CartPole-v1", "ppo", 200000, 1.0), ("CartPole-v1", "pgg_g1.1", 100000, 2.0),
                ("Acrobot-v1", "ppo", 100000, 1.0)}  # fmt: skip
 HALF_WIDTH = 4.302653 / 3**0.5  # t_{0.975,2} · s / √n with s = 1, n = 3
+COLUMNS = ["env_id", "variant", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step", "eval_guidance",
+           "policy", "null_branch", "episode", "episode_seed", "return", "length"]  # fmt: skip
+
+
+def episode_rows(seed_means: dict, config: str | None = None, run_suffix: str = "", policy="sample") -> list[dict]:
+    rows = []
+    for (env, variant, step, gamma), means in seed_means.items():
+        for seed, mean in enumerate(means, start=1):
+            for episode, ret in enumerate([mean - 1, mean + 1]):
+                row = {"env_id": env, "variant": variant, "run": f"{env}__{variant}__s{seed}{run_suffix}", "seed": seed,
+                       "train_guidance": 1.1 if variant != "ppo" else 1.0, "cond_dropout": 0.0, "step": step,
+                       "global_step": step, "eval_guidance": gamma, "policy": policy, "null_branch": "learned",
+                       "episode": episode, "episode_seed": 10_000 + episode, "return": ret, "length": 1}  # fmt: skip
+                if config is not None:
+                    row["config"] = config if " " in config else f"{variant} {config}".strip()
+                rows.append(row)
+    return rows
+
+
+def write_episodes(path, rows) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    columns = COLUMNS + (["config"] if any("config" in r for r in rows) else [])
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, columns)
+        writer.writeheader()
+        writer.writerows(rows)
 
 
 @pytest.fixture
 def sweep_dir(tmp_path):
-    rows = []
-    for (env, variant, step, gamma), means in SEED_MEANS.items():
-        for seed, mean in enumerate(means, start=1):
-            for episode, ret in enumerate([mean - 1, mean + 1]):
-                rows.append({"env_id": env, "variant": variant, "run": f"{env}__{variant}__s{seed}", "seed": seed,
-                             "train_guidance": 1.1 if variant != "ppo" else 1.0, "cond_dropout": 0.0, "step": step,
-                             "global_step": step, "eval_guidance": gamma, "policy": "sample", "null_branch": "learned",
-                             "episode": episode, "episode_seed": 10_000 + episode, "return": ret, "length": 1})  # fmt: skip
-    sweep.write_csv_atomic(tmp_path / "sweep" / "episodes.csv", sweep.EPISODE_COLUMNS, rows)
+    write_episodes(tmp_path / "sweep" / "episodes.csv", episode_rows(SEED_MEANS))
     return tmp_path / "sweep"
 
 
 def generate(sweep_dir, tmp_path, **kw):
     return plots.generate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "out"), **kw))
+
+
+def summary_of(*paths, provenance=None):
+    return plots.summarise(plots.select_mode(plots.read_episodes(paths), "sample", "learned"),
+                           plots.read_provenance(provenance))  # fmt: skip
+
+
+def run_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, str(ROOT / "plot_results.py"), *map(str, args)], capture_output=True, text=True,
+                          timeout=120, cwd=cwd)  # fmt: skip
+
+
+def one_error_line(proc, message: str) -> None:
+    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
+    assert proc.returncode == 2, proc.stderr
+    assert len(errors) == 1 and message in errors[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+# --- tables ---------------------------------------------------------------------------------------
 
 
 def test_tables_hold_expected_cells(sweep_dir, tmp_path):
@@ -73,29 +114,173 @@ def test_latex_is_well_formed(sweep_dir, tmp_path):
     assert all(line.count("$") % 2 == 0 for line in tabular.splitlines())
 
 
-def test_comparison_flags_exactly_the_disagreeing_cells(sweep_dir, tmp_path):
+# --- the agreement test ---------------------------------------------------------------------------
+
+
+def test_welch_and_effect_size_match_hand_computed_values():
+    # ours 10 (sd 1, n 5) vs 12 (sd 2, n 5): t = -2 / sqrt(1/5 + 4/5) = -2; df = 1 / (0.2²/4 + 0.8²/4) = 5.882
+    t_value, df, p = plots.welch(10, 1, 5, 12, 2, 5)
+    assert t_value == pytest.approx(-2.0) and df == pytest.approx(1 / 0.17)
+    assert p == pytest.approx(stats.ttest_ind_from_stats(10, 1, 5, 12, 2, 5, equal_var=False).pvalue, rel=1e-12)
+    assert p == pytest.approx(0.0933789, abs=1e-6)
+    # Hedges' g: pooled sd 2, d = 1, J = 1 - 3 / (4·10 - 9) = 28/31
+    assert plots.hedges_g(12, 2, 5, 10, 2, 5) == pytest.approx(28 / 31)
+    # the paper's 270.6 ± 81.3 over 5 seeds: sd = 81.3 · √5 / t_{0.975,4}
+    assert plots.sd_from_ci(81.3, 5) == pytest.approx(65.47665, abs=1e-4)
+    assert plots.welch(500, 0, 5, 500, 0, 5)[2] == 1.0 and plots.welch(500, 0, 5, 499, 0, 5)[2] == 0.0
+
+
+def test_holm_adjusts_in_step_down_order_and_keeps_nans():
+    # sorted 0.005·4 = 0.02, 0.01·3 = 0.03, 0.03·2 = 0.06, max(0.04·1, 0.06) = 0.06
+    adjusted = plots.holm([0.01, 0.04, math.nan, 0.03, 0.005])
+    assert adjusted[:2] == pytest.approx([0.03, 0.06]) and math.isnan(adjusted[2])
+    assert adjusted[3:] == pytest.approx([0.06, 0.02])
+    assert plots.holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
+
+
+def test_sign_test_counts_above_below_and_ties():
+    above, below, ties, p = plots.sign_test([1.0, 2.0, 3.0, -1.0, 0.0])
+    assert (above, below, ties) == (3, 1, 1) and p == pytest.approx(0.625)
+    assert plots.sign_test([-1.0] * 10)[3] == pytest.approx(2 * 0.5**10)
+
+
+def test_simulated_null_overlap_rate_is_near_certain():
+    rates = plots.null_rates(draws=20_000, shifts=(0.0, 2.0))
+    assert 0.99 < rates[0]["overlap"] < 0.998  # 99.4% for two 5-seed samples of one distribution
+    assert rates[0]["welch_reject"] < 0.06 < rates[1]["welch_reject"]
+
+
+def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_path):
     generate(sweep_dir, tmp_path, compare_paper=True)
     with open(tmp_path / "out" / "compare_paper.csv") as f:
-        rows = list(csv.DictReader(f))
-    compared = {(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])): r["agrees"] for r in rows}
-    paper_cells = {k for k in SEED_MEANS if k[1] == "ppo" or k[0] == "CartPole-v1" or k[1] == "pgg_g1.1"}
-    assert set(compared) == paper_cells
-    assert {k for k, agrees in compared.items() if agrees == "False"} == DISAGREEING
-    assert "**3 disagree**" in (tmp_path / "out" / "compare_paper.md").read_text()
+        rows = [r for r in csv.DictReader(f) if r["reference"] == "paper"]
+    key = lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))  # noqa: E731
+    assert {key(r) for r in rows} == set(SEED_MEANS)
+    paper = {(p["env_id"], p["method"], int(p["step"]), float(p["eval_guidance"])): p
+             for p in csv.DictReader(open(ROOT / "data" / "paper_results.csv"))}  # fmt: skip
+    expected_p = []
+    for r in rows:
+        p = paper[(r["env_id"], "ppo" if r["variant"] == "ppo" else "pgg", int(r["step"]), float(r["eval_guidance"]))]
+        ours = SEED_MEANS[key(r)]
+        sd_paper = float(p["ci95"]) * 5**0.5 / stats.t.ppf(0.975, 4)
+        expected = stats.ttest_ind_from_stats(np.mean(ours), np.std(ours, ddof=1), 3, float(p["mean"]), sd_paper, 5,
+                                              equal_var=False).pvalue  # fmt: skip
+        expected_p.append(1.0 if np.isnan(expected) else expected)  # 500 ± 0 vs 500 ± 1: p computed, not nan
+        assert float(r["p"]) == pytest.approx(expected_p[-1], rel=1e-3, abs=1e-4)
+        assert float(r["diff_pct"]) == pytest.approx(100 * (np.mean(ours) - float(p["mean"])) / abs(float(p["mean"])), abs=1e-3)
+    m = len(rows)  # Holm over the cells of the discrete table
+    order = np.argsort(expected_p)
+    holm = np.maximum.accumulate([min(1.0, (m - i) * expected_p[j]) for i, j in enumerate(order)])
+    for i, j in enumerate(order):
+        assert float(rows[j]["p_holm"]) == pytest.approx(holm[i], rel=1e-3, abs=1e-4)
+    assert {key(r) for r in rows if r["significant"] == "True"} == DISAGREEING
+    assert {key(r) for r in rows if r["ci_overlap"] == "False"} == DISAGREEING
+    report = (tmp_path / "out" / "compare_paper.md").read_text()
+    assert "**3 differ significantly**" in report and "Holm-corrected over these 12 cells" in report
+    assert "**CartPole-v1**: 6 cells; **2 differ significantly after Holm**" in report
+    assert "99.4%" in report or "99.3%" in report or "99.5%" in report  # the simulated null overlap rate
 
 
-def test_figures_have_one_line_per_gamma_plus_ppo(sweep_dir, tmp_path):
+def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
+    means = {("CartPole-v1", "ppo", 500000, 1.0): [489.0, 490.0, 491.0], ("CartPole-v1", "ppo", 400000, 1.0): [480.0, 481.0, 482.0]}
+    write_episodes(tmp_path / "episodes.csv", episode_rows(means))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"), compare_paper=True))
+    rows = list(csv.DictReader(open(tmp_path / "out" / "compare_paper.csv")))
+    cleanrl = [r for r in rows if r["reference"] == "cleanrl"]
+    assert len(cleanrl) == 1 and cleanrl[0]["step"] == "500000"
+    assert float(cleanrl[0]["ref_mean"]) == 490.04
+    assert float(cleanrl[0]["ref_sd"]) == pytest.approx(6.12 * 1.5**0.5, abs=1e-3)  # CleanRL's std has ddof 0, 3 seeds
+    assert "mean ± standard deviation" in (tmp_path / "out" / "compare_paper.md").read_text()
+
+
+# --- configurations -------------------------------------------------------------------------------
+
+
+def test_two_configs_are_never_pooled(tmp_path):
+    cell = ("CartPole-v1", "ppo", 100000, 1.0)
+    default = episode_rows({cell: [190.0]}, config="ppo")
+    faster = episode_rows({cell: [366.0]}, config="learning_rate=0.002", run_suffix="_lr")
+    write_episodes(tmp_path / "episodes.csv", default + faster)
+    summary = summary_of(tmp_path / "episodes.csv")
+    assert sorted((r["series"], r["n_seeds"], r["mean"]) for r in summary) == [
+        ("learning_rate=0.002", 1, 366.0), ("learning_rate=default", 1, 190.0)]  # fmt: skip
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
+    table = (tmp_path / "out" / "table_discrete.md").read_text()
+    assert "| PPO [learning_rate=0.002] | 366.0 |" in table and "| PPO [learning_rate=default] | 190.0 |" in table
+    fig = plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
+    labels = {line.get_label(): list(line.get_ydata()) for line in fig.axes[0].get_lines() if not line.get_label().startswith("_")}
+    assert labels == {}  # no PGG data: the panel says "not run" instead of drawing PPO alone
+    fig = plots.figure_for_variant(summary, ["CartPole-v1"], "ppo")
+    labels = {line.get_label(): list(line.get_ydata()) for line in fig.axes[0].get_lines() if not line.get_label().startswith("_")}
+    assert labels == {"PPO [learning_rate=0.002] (γ = 1)": [366.0], "PPO [learning_rate=default] (γ = 1)": [190.0]}
+
+
+def test_one_config_shows_the_paper_name_without_a_label(tmp_path):
+    write_episodes(tmp_path / "episodes.csv", episode_rows(SEED_MEANS, config="mujoco=2.3.7"))
+    summary = summary_of(tmp_path / "episodes.csv")
+    assert {r["series"] for r in summary} == {""}
+    assert {r["config"] for r in summary} == {"ppo mujoco=2.3.7", "pgg_g1.1 mujoco=2.3.7"}
+
+
+def test_same_config_and_seed_from_two_runs_is_an_error_naming_both(tmp_path):
+    cell = {("CartPole-v1", "ppo", 100000, 1.0): [190.0]}
+    write_episodes(tmp_path / "a.csv", episode_rows(cell, run_suffix="_a"))
+    write_episodes(tmp_path / "b.csv", episode_rows(cell, run_suffix="_b"))
+    with pytest.raises(plots.InputError, match="CartPole-v1__ppo__s1_a .*a.csv.* and CartPole-v1__ppo__s1_b .*b.csv"):
+        plots.read_episodes([tmp_path / "a.csv", tmp_path / "b.csv"])
+    with pytest.raises(plots.InputError, match="appears in .*a.csv twice"):
+        plots.read_episodes([tmp_path / "a.csv", tmp_path / "a.csv"])
+    (tmp_path / "copy.csv").write_text((tmp_path / "a.csv").read_text())
+    with pytest.raises(plots.InputError, match="appears in both .*a.csv and .*copy.csv"):
+        plots.read_episodes([tmp_path / "a.csv", tmp_path / "copy.csv"])
+
+
+def test_cells_from_another_mujoco_are_marked(tmp_path):
+    hopper = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0], ("Walker2d-v4", "ppo", 200000, 1.0): [800.0, 810.0, 820.0]}
+    rows = episode_rows(hopper)
+    write_episodes(tmp_path / "here" / "episodes.csv", [r for r in rows if r["env_id"] == "Hopper-v4"])
+    write_episodes(tmp_path / "there" / "episodes.csv", [r for r in rows if r["env_id"] == "Walker2d-v4"])
+    provenance = tmp_path / "provenance.csv"
+    provenance.write_text("csv,commits,mujoco,machine,notes\n"
+                          f"{tmp_path / 'here' / 'episodes.csv'},abc1234,2.3.7,two cores,\n"
+                          f"{tmp_path / 'there' / 'episodes.csv'},def5678,3.1.6,sixteen cores,\n")  # fmt: skip
+    written = plots.generate(plots.Args(sweeps=(str(tmp_path / "here"), str(tmp_path / "there")), output=str(tmp_path / "out"),
+                                        provenance=str(provenance)))  # fmt: skip
+    table = (tmp_path / "out" / "table_continuous.md").read_text()
+    assert "| PPO | 1100.0 ± 248.4 | 810.0 ± 24.8† |" in table
+    assert "† from a MuJoCo other than 2.3.7: Walker2d-v4 (MuJoCo 3.1.6)" in table
+    assert "Not run: HalfCheetah-v4, Humanoid-v4, InvertedPendulum-v4, Pusher-v4." in table
+    assert "$^\\dagger$" in (tmp_path / "out" / "table_continuous.tex").read_text()
+    provenance_md = (tmp_path / "out" / "provenance.md").read_text()
+    assert "def5678 | 3.1.6 | sixteen cores" in provenance_md and "abc1234 | 2.3.7 | two cores" in provenance_md
+    assert tmp_path / "out" / "provenance.md" in written
+
+
+# --- figures --------------------------------------------------------------------------------------
+
+
+def legend_labels(fig) -> list[str]:
+    return [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+
+
+def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
     written = generate(sweep_dir, tmp_path)
-    summary = sweep.summarise(plots.select_mode(plots.read_episodes([sweep_dir]), "sample", "learned"))
+    summary = summary_of(sweep_dir)
     fig = plots.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "pgg_g1.1")
     for ax in fig.axes:
         lines = [line for line in ax.get_lines() if not line.get_label().startswith("_")]  # not error-bar caps
-        assert [line.get_label() for line in lines] == ["PPO", "γ=1", "γ=2"]
+        assert [line.get_label() for line in lines] == ["PPO", "γ = 1", "γ = 2"]
         ppo, gamma1, gamma2 = lines
         assert ppo.get_color() == "black" and ppo.get_linestyle() == "-" and gamma2.get_linestyle() == "--"
+        assert gamma1.get_marker() != gamma2.get_marker()  # stacked lines stay apart
         assert len(ax.collections) >= 3  # one CI band (and error bars) per line
-    cartpole = [line for line in fig.axes[1].get_lines() if line.get_label() == "γ=2"][0]
+    assert legend_labels(fig) == ["PPO", "γ = 2", "γ = 1"]  # the paper's order: PPO, then the highest γ first
+    assert fig._suptitle.get_text().startswith("PGG, γ_train = 1.1")
+    assert "pgg_g1.1" not in fig._suptitle.get_text() and "checkpoints, eval guidance" not in fig._suptitle.get_text()
+    cartpole = [line for line in fig.axes[1].get_lines() if line.get_label() == "γ = 2"][0]
     assert list(cartpole.get_ydata()) == [101.0, 500.0]
+    ppo_fig = plots.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "ppo")
+    assert ppo_fig._suptitle.get_text().startswith("PPO")
     for path in written:
         if path.suffix in (".png", ".pdf"):
             head = path.read_bytes()[:8]
@@ -103,14 +288,78 @@ def test_figures_have_one_line_per_gamma_plus_ppo(sweep_dir, tmp_path):
             assert 5_000 < path.stat().st_size < 5_000_000
 
 
+def test_continuous_figures_have_the_paper_layout_with_not_run_panels(tmp_path):
+    means = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0], ("Hopper-v4", "pgg_g1.1", 200000, 1.0): [900.0, 950.0, 1000.0]}
+    write_episodes(tmp_path / "episodes.csv", episode_rows(means))
+    written = plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
+    names = {p.name for p in written}
+    assert {"fig_continuous_ppo.png", "fig_continuous_pgg_g1.1.png", "fig_continuous_pgg_drop0.1.png"} <= names
+    summary = summary_of(tmp_path / "episodes.csv")
+    layout, cols = plots.figure_layout("continuous", ["Hopper-v4"])
+    fig = plots.figure_for_variant(summary, ["Hopper-v4"], "pgg_g1.1", layout, cols)
+    panels = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(panels) == 6 and panels[0].get_subplotspec().get_gridspec().get_geometry() == (2, 3)
+    not_run = [ax.get_title() for ax in panels if any(t.get_text() == "not run" for t in ax.texts)]
+    assert not_run == ["HalfCheetah-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4"]
+    dropout = plots.figure_for_variant(summary, ["Hopper-v4"], "pgg_drop0.1", layout, cols)
+    assert all(any(t.get_text() == "not run" for t in ax.texts) for ax in dropout.axes if ax.get_visible())
+
+
+def test_cartpole_axis_is_clipped_to_its_returns_and_clipped_bands_are_marked(tmp_path):
+    # two seeds: t_{0.975,1} = 12.7, so the γ = 2 band runs far past 500
+    means = {("CartPole-v1", "ppo", 100000, 1.0): [100.0, 300.0], ("CartPole-v1", "pgg_g1.1", 100000, 1.0): [150.0, 350.0],
+             ("CartPole-v1", "pgg_g1.1", 100000, 2.0): [300.0, 500.0], ("CartPole-v1", "ppo", 200000, 1.0): [400.0, 500.0],
+             ("CartPole-v1", "pgg_g1.1", 200000, 1.0): [450.0, 500.0], ("CartPole-v1", "pgg_g1.1", 200000, 2.0): [480.0, 500.0]}  # fmt: skip
+    write_episodes(tmp_path / "episodes.csv", episode_rows(means))
+    summary = summary_of(tmp_path / "episodes.csv")
+    for fig in (plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1"),
+                plots.gamma_response(summary, ["CartPole-v1"], step=None)):  # fmt: skip
+        ax = fig.axes[0]
+        low, high = ax.get_ylim()
+        assert -20 <= low and high <= 520  # 0–500 and a small margin, not −1,000 to 1,500
+        edge_marks = [c for c in ax.collections if isinstance(c, matplotlib.collections.PathCollection)
+                      and len(c.get_offsets()) and np.allclose(np.asarray(c.get_offsets())[:, 1], high)]  # fmt: skip
+        assert edge_marks, "a band past the top of the axis must be marked"
+        assert "CI runs past the axis (clipped)" in legend_labels(fig)
+
+
 def test_gamma_response_labels_exactly_the_swept_gammas(sweep_dir):
-    summary = sweep.summarise(plots.select_mode(plots.read_episodes([sweep_dir]), "sample", "learned"))
-    fig = plots.gamma_response(summary, ["CartPole-v1"], step=None)
+    fig = plots.gamma_response(summary_of(sweep_dir), ["CartPole-v1"], step=None)
     fig.canvas.draw()
     ax = fig.axes[0]
     assert ax.get_xscale() == "log"
     assert [t.get_text() for t in ax.get_xticklabels()] == ["1", "2"]
     assert not [t.get_text() for t in ax.get_xticklabels(minor=True) if t.get_text()]
+    assert legend_labels(fig) == ["PPO", "PGG, γ_train = 1.1"]
+
+
+def test_learning_curves_draw_few_points_and_say_so(tmp_path):
+    from torch.utils.tensorboard import SummaryWriter
+
+    for seed in (1, 2):
+        run = tmp_path / "runs" / f"CartPole-v1__pgg_g1.1__s{seed}"
+        run.mkdir(parents=True)
+        (run / "args.json").write_text(f'{{"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": {seed}}}')
+        writer = SummaryWriter(str(run))
+        for step, value in ((512, 20.0 + seed), (1024, 40.0 + seed)):  # episodes logged at two steps only
+            writer.add_scalar("charts/episodic_return", value, step)
+        writer.close()
+    written = []
+    captured = {}
+    real_save = plots.save_figure
+    plots.save_figure = lambda fig, stem, out: captured.setdefault("fig", fig) and real_save(fig, stem, out)
+    try:
+        plots.learning_curves([str(tmp_path / "runs")], tmp_path / "out", written)
+    finally:
+        plots.save_figure = real_save
+    ax = captured["fig"].axes[0]
+    line = [line for line in ax.get_lines() if line.get_label().startswith("PGG, γ_train = 1.1 (n=2)")][0]
+    assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
+    assert any("too few points" in t.get_text() and "only 2 points" in t.get_text() for t in ax.texts)
+    assert (tmp_path / "out" / "learning_curves.png").exists()
+
+
+# --- summaries and controls -----------------------------------------------------------------------
 
 
 def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
@@ -124,17 +373,27 @@ def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
     assert float(row["ci_low"]) <= float(row["iqm"]) <= float(row["ci_high"])
 
 
+def test_batched_iqm_equals_scipy_trim_mean():
+    rng = np.random.default_rng(0)
+    samples = [rng.normal(size=(7, 5)), rng.normal(size=(7, 3))]
+    expected = [stats.trim_mean(np.concatenate([s[i] for s in samples]), 0.25) for i in range(7)]
+    assert plots.iqm_along(*samples, axis=-1) == pytest.approx(expected)
+
+
 def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
     with open(sweep_dir / "episodes.csv") as f:
         rows = [r for r in csv.DictReader(f) if r["env_id"] == "CartPole-v1" and r["step"] == "100000"]
     uniform = [r | {"null_branch": "uniform", "return": float(r["return"]) + 10} for r in rows if r["variant"] == "ppo"]
-    sweep.write_csv_atomic(tmp_path / "uniform.csv", sweep.EPISODE_COLUMNS, uniform)
+    write_episodes(tmp_path / "uniform.csv", uniform)
     plots.generate(plots.Args(sweeps=(str(sweep_dir), str(tmp_path / "uniform.csv")), output=str(tmp_path / "out")))
     table = (tmp_path / "out" / "controls.md").read_text().splitlines()
     assert table[0] == "| env | variant | step | eval γ | sample, learned null | sample, uniform null |"
     assert table[2:] == [f"| CartPole-v1 | ppo | 100k | 1 | 271.0 ± {HALF_WIDTH:.1f} | 281.0 ± {HALF_WIDTH:.1f} |"]
     # the main tables still report the sampled, learned-null mode only
     assert f"| PPO | -200.0 ± {HALF_WIDTH:.1f} | 271.0 ± {HALF_WIDTH:.1f} |" in (tmp_path / "out" / "table_discrete.md").read_text()
+
+
+# --- errors: one line, up front -------------------------------------------------------------------
 
 
 @pytest.mark.parametrize(
@@ -153,10 +412,31 @@ def test_bad_input_exits_with_one_line(tmp_path, setup, extra, message):
     elif setup == "columns":
         target.write_text("a,b\n1,2\n")
     elif setup == "foreign_env":
-        row = {c: 0 for c in sweep.EPISODE_COLUMNS} | {"env_id": "MyEnv-v0", "variant": "ppo", "policy": "sample",
-                                                       "null_branch": "learned", "seed": 1}  # fmt: skip
-        sweep.write_csv_atomic(target, sweep.EPISODE_COLUMNS, [row, row | {"seed": 2}])
-    proc = subprocess.run([sys.executable, str(ROOT / "plot_results.py"), str(target), "--output", str(tmp_path / "o"), *extra],
-                          capture_output=True, text=True, timeout=120)  # fmt: skip
-    errors = [line for line in proc.stderr.splitlines() if line.startswith("error:")]
-    assert proc.returncode == 2 and len(errors) == 1 and message in errors[0] and "Traceback" not in proc.stderr
+        write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}))
+    one_error_line(run_cli(target, "--output", tmp_path / "o", *extra), message)
+
+
+def test_no_paths_is_a_usage_error(tmp_path):
+    proc = run_cli("--output", tmp_path / "o")
+    one_error_line(proc, "no sweep given")
+    assert "usage: plot_results.py SWEEP" in proc.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_missing_runs_fails_before_anything_is_written(sweep_dir, tmp_path):
+    proc = run_cli(sweep_dir, "--runs", tmp_path / "no_such_runs", "--output", tmp_path / "o")
+    one_error_line(proc, f"--runs: no such file or directory: {tmp_path / 'no_such_runs'}")
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_unwritable_output_is_one_line(sweep_dir, tmp_path):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    one_error_line(run_cli(sweep_dir, "--output", blocker / "out"), "cannot write to")
+
+
+def test_invalid_choices_are_rejected_up_front(sweep_dir, tmp_path):
+    with pytest.raises(plots.InputError, match="--policy must be sample or deterministic"):
+        plots.validate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), policy="greedy"))
+    with pytest.raises(plots.InputError, match="--provenance: no such file"):
+        plots.validate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), provenance=str(tmp_path / "x.csv")))
