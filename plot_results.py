@@ -117,6 +117,9 @@ class Args:
     """test our cells against the paper's published numbers (data/paper_results.csv) and CleanRL's PPO"""
     provenance: str | None = None
     """CSV naming, for each input CSV, the commits, MuJoCo version and machine behind it (results/provenance.csv)"""
+    paper_layout: bool = True
+    """continuous figures in the paper's 2×3 layout, every task ("not run" where there is no data) and a
+    figure per paper variant; --no-paper-layout draws only what was swept"""
     response_step: int | None = None
     """checkpoint step of the γ-response plot; default the last step of each env"""
     policy: str = "sample"
@@ -474,7 +477,7 @@ def table_rows(summary: list[dict], envs: list[str], ppo_sweep: bool, latex: boo
                 yield ("row", row_label, [fmt_cell(cells.get((e, variant, series, step, gamma)), latex) for e in envs])
 
 
-def table_notes(summary, envs, latex: bool) -> list[str]:
+def table_notes(summary, envs, latex: bool, paper_layout: bool = True) -> list[str]:
     notes = []
     others = sorted({(r["env_id"], r["mujoco"]) for r in summary if other_mujoco(r)})
     if others:
@@ -485,12 +488,12 @@ def table_notes(summary, envs, latex: bool) -> list[str]:
         notes.append(f"{dagger} from a MuJoCo other than {REFERENCE_MUJOCO}: {where}{rest}.")
     kind = kind_of(envs[0]) if envs else "discrete"
     missing = [e for e in PAPER_ENVS.get(kind, ()) if e not in envs]
-    if missing and kind == "continuous":
+    if missing and kind == "continuous" and paper_layout:
         notes.append(f"Not run: {', '.join(missing)}.")
     return notes
 
 
-def markdown_table(summary, envs, ppo_sweep=False, title="") -> str:
+def markdown_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) -> str:
     lines = [f"**{title}** (mean ± 95% CI over seeds)", "", "| Method | " + " | ".join(envs) + " |",
              "|---|" + "---|" * len(envs)]  # fmt: skip
     for item in table_rows(summary, envs, ppo_sweep, latex=False):
@@ -498,11 +501,11 @@ def markdown_table(summary, envs, ppo_sweep=False, title="") -> str:
             lines.append(f"| **{item[1]}** |" + " |" * len(envs))
         else:
             lines.append(f"| {item[1]} | " + " | ".join(item[2] or [""] * len(envs)) + " |")
-    notes = table_notes(summary, envs, latex=False)
+    notes = table_notes(summary, envs, latex=False, paper_layout=paper_layout)
     return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
 
 
-def latex_table(summary, envs, ppo_sweep=False, title="") -> str:
+def latex_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) -> str:
     columns = len(envs) + 1
     body = []
     for item in table_rows(summary, envs, ppo_sweep, latex=True):
@@ -511,7 +514,7 @@ def latex_table(summary, envs, ppo_sweep=False, title="") -> str:
         else:
             body.append(" & ".join([item[1], *(item[2] or [""] * len(envs))]) + " \\\\")
     header = " & ".join(["Method", *envs]) + " \\\\"
-    notes = [n.replace("γ", "$\\gamma$") for n in table_notes(summary, envs, latex=True)]
+    notes = [n.replace("γ", "$\\gamma$") for n in table_notes(summary, envs, latex=True, paper_layout=paper_layout)]
     return "\n".join([
         "\\documentclass{article}", "\\usepackage{booktabs}", "\\usepackage[margin=1cm,landscape]{geometry}",
         "\\begin{document}", "\\begin{table}[h]", "\\centering", "\\small",
@@ -1046,7 +1049,7 @@ def fmt_p(p: float) -> str:
 
 def p_is(p: float) -> str:
     """"p = 0.012" or "p < 0.001"."""
-    return f"p {fmt_p(p)}" if fmt_p(p).startswith("<") else f"p = {fmt_p(p)}"
+    return "p < 0.001" if fmt_p(p).startswith("<") else f"p = {fmt_p(p)}"
 
 
 def cell_name(r: dict) -> str:
@@ -1203,16 +1206,18 @@ def generate(args: Args) -> list[Path]:
     for kind, rows in sorted(by_kind.items()):
         envs = sorted({r["env_id"] for r in rows})
         title = f"{kind.capitalize()} environments"
-        write(output / f"table_{kind}.md", markdown_table(rows, envs, title=title), written)
-        write(output / f"table_{kind}.tex", latex_table(rows, envs, title=title), written)
+        layout_args = {"title": title, "paper_layout": args.paper_layout}
+        write(output / f"table_{kind}.md", markdown_table(rows, envs, **layout_args), written)
+        write(output / f"table_{kind}.tex", latex_table(rows, envs, **layout_args), written)
         ppo_gammas = {float(r["eval_guidance"]) for r in rows if r["variant"] == "ppo"}
         if len(ppo_gammas) > 1:
             title = f"Vanilla PPO checkpoints swept over eval guidance ({kind})"
-            write(output / f"table_{kind}_ppo_sweep.md", markdown_table(rows, envs, ppo_sweep=True, title=title), written)
-            write(output / f"table_{kind}_ppo_sweep.tex", latex_table(rows, envs, ppo_sweep=True, title=title), written)
-        layout, cols = figure_layout(kind, envs)
-        variants = sorted({r["variant"] for r in rows} | (set(PAPER_VARIANTS) if kind == "continuous" else set()),
-                          key=lambda v: (variant_rank(v), v))  # fmt: skip
+            layout_args = {"title": title, "paper_layout": args.paper_layout}
+            write(output / f"table_{kind}_ppo_sweep.md", markdown_table(rows, envs, True, **layout_args), written)
+            write(output / f"table_{kind}_ppo_sweep.tex", latex_table(rows, envs, True, **layout_args), written)
+        layout, cols = figure_layout(kind, envs) if args.paper_layout else (envs, None)
+        paper_variants = set(PAPER_VARIANTS) if kind == "continuous" and args.paper_layout else set()
+        variants = sorted({r["variant"] for r in rows} | paper_variants, key=lambda v: (variant_rank(v), v))
         for variant in variants:
             save_figure(figure_for_variant(rows, envs, variant, layout, cols), output / f"fig_{kind}_{variant}", written)
         save_figure(gamma_response(rows, envs, args.response_step), output / f"gamma_response_{kind}", written)
