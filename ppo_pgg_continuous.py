@@ -29,6 +29,7 @@ import random
 import shutil
 import sys
 import time
+import warnings
 from collections import defaultdict, deque
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -190,7 +191,7 @@ def check_args(args: Args) -> str | None:
                 "with a newer mujoco use Pusher-v5"
             )
         return f"cannot make environment {args.env_id!r}: {e}"
-    except gym.error.Error as e:
+    except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
         return f"cannot make environment {args.env_id!r}: {e}"
     action_space = env.action_space
     if args.capture_video:
@@ -207,8 +208,10 @@ def video_error(env: gym.Env) -> str | None:
         import moviepy  # noqa: F401  (gymnasium's RecordVideo writes with it)
 
         env.reset(seed=0)
-        if env.render() is None:
-            return f"{env.spec.id} renders no frames"
+        with warnings.catch_warnings():  # a failing GL backend warns before it raises
+            warnings.simplefilter("ignore")
+            if env.render() is None:
+                return f"{env.spec.id} renders no frames"
     except ImportError as e:
         return f"--capture-video needs the [video] extra (pip install -e '.[video]'): {e}"
     except Exception as e:  # rendering backends fail with anything from OpenGL, pygame or MuJoCo

@@ -6,15 +6,18 @@
     python reproduce.py --preset continuous --executor slurm --slurm-partition cpu   # a job array
 
 The grid is environments × seeds × training variants:
-  ppo          PPO, γ_train = 1 (the null embedding gets no gradient: exactly CleanRL's PPO)
+  ppo          PPO, γ_train = 1 (the null embedding gets no gradient: CleanRL's PPO algorithm)
   pgg_g1.1     PGG, γ_train = 1.1, no dropout (the paper's main variant)
   pgg_drop0.1  PGG, γ_train = 1, conditioning dropout 0.1
 Run directories are <root>/<env>__<variant>__s<seed>, logs <root>/logs/<run>.log. Rerunning the same
-command skips every run whose final checkpoint exists (a half-finished run restarts from scratch) and
-every finished sweep cell, so killing the launcher loses no finished work. The sweep CSVs, tables and
-figures go to <results>.
+command skips every run whose final checkpoint exists, resumes a half-finished run from its last
+checkpoint (bit for bit, see the training scripts' --resume) and skips every finished sweep cell, so
+killing the launcher, even with SIGKILL, loses at most the work since each run's last checkpoint: its
+training children die with it. Preempted Slurm array tasks are requeued and resume the same way. The
+sweep CSVs, tables and figures go to <results>.
 """
 
+import ctypes
 import os
 import signal
 import subprocess
@@ -146,13 +149,26 @@ class RunSpec:
         return cmd
 
 
+LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform == "linux" else None  # loaded here, not after fork
+
+
+def die_with_parent() -> None:
+    """In a child before exec: the kernel kills it when the thread that started it ends, which a
+    launcher killed by SIGKILL cannot arrange itself (Linux; elsewhere only SIGINT/SIGTERM do)."""
+    if LIBC is not None:
+        LIBC.prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+
+
 def train_one(spec: RunSpec) -> None:
-    """Trains one run in a child process pinned to one thread; raises with the log's path on failure.
-    The function every executor runs, so local and cluster runs share one code path."""
+    """Trains (or resumes) one run in a child process pinned to one thread; raises with the log's path
+    on failure. The function every executor runs, so local and cluster runs share one code path. The
+    child is started and waited for in this thread, which its death signal is tied to."""
     spec.log.parent.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONUNBUFFERED="1")
-    with open(spec.log, "w") as log:
-        child = subprocess.Popen(spec.command(), stdout=log, stderr=subprocess.STDOUT, env=env)
+    with open(spec.log, "a") as log:
+        child = subprocess.Popen(
+            [*spec.command(), "--resume"], stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=die_with_parent
+        )
         RUNNING.add(child)
         code = child.wait()
         RUNNING.discard(child)
@@ -190,10 +206,26 @@ class Progress:
         print(self.line(), file=sys.stderr, flush=True)
 
 
+class TrainingTask:
+    """train_one, timed: returns the run's wall time. Submitit calls `checkpoint` when Slurm preempts
+    an array task or its time runs out; the task is requeued and, as train_one passes --resume,
+    continues from the run's last checkpoint."""
+
+    def __call__(self, spec: RunSpec) -> float:
+        start = time.time()
+        train_one(spec)
+        return time.time() - start
+
+    def checkpoint(self, spec: RunSpec):
+        import submitit
+
+        return submitit.helpers.DelayedSubmission(self, spec)
+
+
 def run_local(todo: list[RunSpec], progress: Progress, workers: int) -> None:
     progress.workers = workers
     with ThreadPoolExecutor(workers) as pool:
-        started = {pool.submit(timed, train_one, spec): spec for spec in todo}
+        started = {pool.submit(TrainingTask(), spec): spec for spec in todo}
         progress.running = min(workers, len(todo))
         progress.show()
         pending = set(started)
@@ -204,12 +236,6 @@ def run_local(todo: list[RunSpec], progress: Progress, workers: int) -> None:
                 record(progress, started[future], error, 0.0 if error else future.result())
             progress.running = min(workers, len(pending))
             progress.show()
-
-
-def timed(fn, spec) -> float:
-    start = time.time()
-    fn(spec)
-    return time.time() - start
 
 
 def record(progress: Progress, spec: RunSpec, error: BaseException | None, seconds: float) -> None:
@@ -234,7 +260,7 @@ def run_submitit(todo: list[RunSpec], progress: Progress, args: Args) -> None:
         executor = submitit.LocalExecutor(folder=folder)
         executor.update_parameters(timeout_min=args.slurm_time_min)
         progress.workers = len(todo)
-    jobs = executor.map_array(timed, [train_one] * len(todo), todo)
+    jobs = executor.map_array(TrainingTask(), todo)
     pending = dict(zip(jobs, todo))
     while pending:
         progress.running = len(pending)
