@@ -563,7 +563,8 @@ def save_figure(fig, stem: Path, written: list) -> None:
 def panels(n: int, cols: int | None = None):
     cols = cols or min(n, 3)
     rows = math.ceil(n / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.7 * rows), squeeze=False, layout="constrained")
+    size = (4.4, 3.2) if n == 1 else (3.4 * cols, 2.7 * rows)  # a lone panel next to a legend needs room
+    fig, axes = plt.subplots(rows, cols, figsize=size, squeeze=False, layout="constrained")
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     return fig, list(axes.ravel()[:n])
@@ -819,8 +820,9 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
             centres = (edges[:-1] + edges[1:]) / 2
             present = ~np.isnan(per_seed).all(axis=0)
             stats_per_bin = [mean_ci95(col[~np.isnan(col)]) for col in per_seed.T[present]]
-            rows = [{"mean": m, "ci95": h} for m, h, _, _ in stats_per_bin]
-            name = series_name(variant, label) + f" (n={len(seeds)})"
+            banded = len(seeds) >= 3  # with 2 seeds t_{0.975,1} = 12.7: a band would cover the panel
+            rows = [{"mean": m, "ci95": h if banded else 0.0} for m, h, _, _ in stats_per_bin]
+            name = series_name(variant, label) + f" (n={len(seeds)}{'' if banded else ', no CI band'})"
             few = present.sum() < min_points
             _, data = plot_series(ax, centres[present], rows, errorbars=False, band_alpha=0.1 if len(seeds) > 2 else 0.05,
                                   color="black" if variant == "ppo" else f"C{i}", linewidth=1,

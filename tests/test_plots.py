@@ -353,7 +353,7 @@ def test_learning_curves_draw_few_points_and_say_so(tmp_path):
     finally:
         plots.save_figure = real_save
     ax = captured["fig"].axes[0]
-    line = [line for line in ax.get_lines() if line.get_label().startswith("PGG, γ_train = 1.1 (n=2)")][0]
+    line = [line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)"][0]
     assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
     assert any("too few points" in t.get_text() and "only 2 points" in t.get_text() for t in ax.texts)
     assert (tmp_path / "out" / "learning_curves.png").exists()
