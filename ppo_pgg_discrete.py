@@ -179,12 +179,11 @@ def check_args(args: Args) -> str | None:
     except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
         return f"cannot make environment {args.env_id!r}: {e}"
     action_space = env.action_space
-    if args.capture_video:
-        error = video_error(env)
+    error = video_error(env) if args.capture_video else None
     env.close()
     if not isinstance(action_space, gym.spaces.Discrete):
         return f"{args.env_id} has a {type(action_space).__name__} action space; this script needs Discrete (use ppo_pgg_continuous.py)"
-    return error if args.capture_video else None
+    return error
 
 
 def video_error(env: gym.Env) -> str | None:
