@@ -31,7 +31,7 @@ import sys
 import time
 import warnings
 from collections import defaultdict, deque
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import gymnasium as gym
