@@ -4,29 +4,51 @@
     python eval_gamma_sweep.py runs/discrete --gammas 1 2 5 --steps 100000 500000 --workers 2
 
 Every checkpoint under the given run directories (or roots) is evaluated at each γ for `--episodes`
-episodes. All episodes of all γ values of one checkpoint step together as one batch of environments
-with one batched policy forward per step.
+episodes. A (checkpoint, γ) cell is evaluated on its own: its episodes step together, one row each
+in a batch of their own, with one policy forward per step; an episode that ends keeps its row
+(padded) until the whole cell is done.
 
 Reproducibility. Episode k of every cell starts from `env.reset(seed=eval_seed + k)` and draws its
 action noise from its own stream, `np.random.default_rng([eval_seed + k, 1])`: the same episode seeds
 and noise for every γ and every checkpoint (common random numbers). The default eval_seed, 10_000,
 keeps evaluation seeds disjoint from the training scripts' (seed + env index, i.e. small integers).
-Policy forwards always run on at least MIN_FORWARD_ROWS rows, because CPU BLAS rounds a 1-3 row
-product differently from a larger one: an episode's actions never depend on how many other
-episodes share its batch, so the batched sweep equals a sequential one-env evaluation exactly.
 
-Outputs (in --output): cells/*.csv, one per finished (checkpoint, γ) cell, written atomically; a rerun
-skips those cells, so an interrupted sweep loses only the cells in flight. Then episodes.csv (every
-episode of the requested cells, sorted) and summary.csv (per env, variant, step and γ: mean over seeds
-of the per-seed mean return, and its 95% confidence interval, see `mean_ci95`).
+Exactness. A cell is computed by the same operations on the same shapes whatever else is swept:
+every policy forward of a cell has cell_rows(episodes) = max(episodes, 8) rows, in torch-allocated
+memory, from its first step to its last, and nothing of another cell enters its batch. On one machine
+and software stack a cell's rows are therefore bit-identical whether it is swept alone, beside other
+γ values, in a worker process, or after a resume; this does not rest on how the BLAS rounds products
+of different row counts (MKL with AVX-512 on Intel CPUs rounds a 16-row product differently from an
+8-row one). It does not hold across machines: another CPU may round differently, so the same
+checkpoint evaluated elsewhere gives statistically equal, not identical, episodes. The sequential
+one-env reference (evaluate_sequential, one observation per forward) agrees to rounding: identically
+on the AMD EPYC this was developed on, and within ~1e-7 relative (tested to rtol 1e-4) where the BLAS
+rounds by row count; over long MuJoCo episodes such differences can grow.
+
+Configurations. A cell's seeds must be distinct runs of one training configuration. Every row
+carries `config` (config_label: the variant and every training argument that differs from the
+training script's defaults, e.g. `pgg_g1.1 learning_rate=0.002`), summaries are grouped by it, and
+two checkpoints of one env, configuration, seed and step are an error naming both.
+
+Outputs (in --output, locked against a second sweep while this one runs): cells/*.csv, one per
+finished (checkpoint, γ) cell, written atomically and named by the bytes of the checkpoint that were
+evaluated, the γ and the settings; a rerun skips those cells, so an interrupted sweep (Ctrl-C: exit
+status 130) loses only the cells in flight. Then episodes.csv (every episode of the requested cells,
+sorted) and summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean
+return, and its 95% confidence interval, see `mean_ci95`).
 """
 
 import csv
+import ctypes
+import dataclasses
+import fcntl
 import functools
 import hashlib
+import io
 import math
 import multiprocessing
 import os
+import signal
 import sys
 import time
 from collections import defaultdict
@@ -34,6 +56,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
+import gymnasium as gym
 import numpy as np
 import torch
 import tyro
@@ -46,16 +69,21 @@ PAPER_GAMMAS = {
     "discrete": (1.0, 1.5, 2.0, 5.0, 10.0, 20.0),
     "continuous": (1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.3, 1.5),
 }
+# Policy forwards run on at least this many rows (padded). CPU BLAS rounds a 1-3 row product differently
+# from a larger one, so the one-row sequential reference pads to it; on the AMD EPYC this was written on,
+# products of 8 or more rows round alike, and the reference equals the cells to the bit there.
 MIN_FORWARD_ROWS = 8
 # Part of every cell's identity; raised when a fix changes what a cell evaluates to, so that a rerun
-# recomputes cells from before it. 2: continuous actions clipped to the env's bounds.
-EVALUATOR_REVISION = 2
+# recomputes cells from before it. 2: continuous actions clipped to the env's bounds. 3: each cell in
+# a batch of its own (its numbers no longer depend on the other cells), Gumbel noise in float64, and
+# the config column.
+EVALUATOR_REVISION = 3
 EPISODE_COLUMNS = [
-    "env_id", "variant", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
+    "env_id", "variant", "config", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
     "eval_guidance", "policy", "null_branch", "episode", "episode_seed", "return", "length",
 ]  # fmt: skip
 SUMMARY_COLUMNS = [
-    "env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy", "null_branch",
+    "env_id", "variant", "config", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy", "null_branch",
     "n_seeds", "n_episodes", "mean", "ci95", "ci_low", "ci_high", "ci_method", "seed_means",
 ]  # fmt: skip
 
@@ -94,16 +122,27 @@ class InputError(Exception):
 # --- checkpoints ----------------------------------------------------------------------------------
 
 
+TRAINING_MODULES = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
+
+
+def read_checkpoint(path: Path) -> tuple[str, dict]:
+    """(sha1 of the file's bytes, checkpoint dict), both from one read of the file: what is evaluated
+    is exactly what is hashed. ValueError if it is not a checkpoint of either training script."""
+    try:
+        data = Path(path).read_bytes()
+        ckpt = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
+        first_line = str(e).splitlines()[0] if str(e) else ""
+        raise ValueError(f"unreadable checkpoint: {type(e).__name__}: {first_line}") from None
+    if not isinstance(ckpt, dict) or TRAINING_MODULES.get(ckpt.get("action_space")) is None:
+        raise ValueError("not a PGG checkpoint (no known action_space field)")
+    return hashlib.sha1(data).hexdigest(), ckpt
+
+
 def load_any_checkpoint(path: Path):
     """(agent, checkpoint dict) from a file of either training script; ValueError if it is neither."""
-    try:
-        ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
-        raise ValueError(f"unreadable checkpoint: {type(e).__name__}: {e}") from None
-    module = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}.get(ckpt.get("action_space"))
-    if module is None:
-        raise ValueError("not a PGG checkpoint (no known action_space field)")
-    return module.agent_from_checkpoint(ckpt, path), ckpt
+    _, ckpt = read_checkpoint(path)
+    return TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, path), ckpt
 
 
 def variant_label(train_guidance: float, cond_dropout: float) -> str:
@@ -112,8 +151,58 @@ def variant_label(train_guidance: float, cond_dropout: float) -> str:
     return f"pgg_drop{cond_dropout:g}" if train_guidance == 1.0 else f"pgg_g{train_guidance:g}_drop{cond_dropout:g}"
 
 
+# Training arguments that change how a run is carried out, not what it trains. The training scripts
+# name theirs in RUN_ONLY_ARGS; this is the set for scripts from before that.
+RUN_ONLY_ARGS = frozenset({
+    "exp_name", "output_dir", "run_name", "track", "wandb_project_name", "wandb_entity", "checkpoint_interval",
+    "torch_threads", "compile", "torch_deterministic", "capture_video", "resume", "overwrite", "progress",
+})  # fmt: skip
+# Training arguments that a sweep's rows carry in columns of their own (env_id, seed) or in the variant.
+OWN_COLUMNS = frozenset({"env_id", "seed", "guidance", "cond_dropout"})
+
+
+@functools.cache
+def training_defaults(kind: str) -> dict:
+    return dataclasses.asdict(TRAINING_MODULES[kind].Args())
+
+
+def format_arg(value) -> str:
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def config_label(ckpt: dict) -> str:
+    """The training configuration of a checkpoint, as a readable label: the variant, then
+    `key=value` for every training argument that differs from the training script's current
+    default (sorted by name), leaving out env_id, seed, the variant's own two and the arguments that
+    do not change what is trained (RUN_ONLY_ARGS); then `mujoco=<version>` where the checkpoint
+    records one and the task runs on MuJoCo. Arguments missing from an old checkpoint count as the
+    current defaults; arguments the current script no longer has are left out.
+    E.g. `pgg_g1.1 learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`."""
+    module = TRAINING_MODULES[ckpt["action_space"]]
+    train_args, defaults = ckpt["args"], training_defaults(ckpt["action_space"])
+    excluded = frozenset(getattr(module, "RUN_ONLY_ARGS", RUN_ONLY_ARGS)) | OWN_COLUMNS
+    words = [variant_label(train_args["guidance"], train_args["cond_dropout"])]
+    for key in sorted(defaults.keys() - excluded):
+        value = train_args.get(key, defaults[key])
+        if value != defaults[key]:
+            words.append(f"{key}={format_arg(value)}")
+    mujoco = (ckpt.get("versions") or {}).get("mujoco")
+    if mujoco and is_mujoco_env(ckpt["env_id"]):
+        words.append(f"mujoco={mujoco}")
+    return " ".join(words)
+
+
+@functools.cache
+def is_mujoco_env(env_id: str) -> bool:
+    try:
+        entry_point = gym.spec(env_id).entry_point
+    except gym.error.Error:
+        return False
+    return isinstance(entry_point, str) and entry_point.startswith("gymnasium.envs.mujoco")
+
+
 def discover_checkpoints(paths, steps) -> list[Path]:
-    found = []
+    found = {}
     for raw in paths:
         path = Path(raw)
         if not path.exists():
@@ -121,13 +210,15 @@ def discover_checkpoints(paths, steps) -> list[Path]:
         matches = [path] if path.is_file() else sorted(path.rglob("checkpoints/step_*.pt"))
         if not matches:
             raise InputError(f"no checkpoints (checkpoints/step_*.pt) under {raw}")
-        found.extend(matches)
+        for match in matches:  # one entry per file, however many of the given paths reach it
+            found.setdefault(match.resolve(), match)
+    found = list(found.values())
     if steps is not None:
         wanted = {f"step_{s:09d}.pt" for s in steps}
         found = [p for p in found if p.name in wanted]
         if not found:
             raise InputError(f"no checkpoint at steps {list(steps)} under {list(paths)}")
-    return sorted(set(found))
+    return sorted(found)
 
 
 # --- the batched guided policy ---------------------------------------------------------------------
@@ -135,10 +226,23 @@ def discover_checkpoints(paths, steps) -> list[Path]:
 
 class GuidedPolicy:
     """The guided policy of one checkpoint, evaluated for a batch of raw observations with one
-    guidance strength per row. The unconditional branch is computed once, here."""
+    guidance strength per row. The unconditional branch is computed once, here.
+
+    The conditional branch is the checkpoint's actor in torch, its Linear layers called directly on
+    detached weights (the same operations as `agent.actor(x)`, without nn.Module's per-call cost and
+    autograd's bookkeeping); guidance, noise, clipping and argmax are then elementwise float32 numpy,
+    the same IEEE operations torch would do."""
 
     def __init__(self, agent, ckpt: dict, uniform_null: bool = False):
         self.agent, self.kind = agent, ckpt["action_space"]
+        mlp = agent.actor if self.kind == "discrete" else agent.actor_mean
+        self.in_features = next(m.in_features for m in mlp if isinstance(m, torch.nn.Linear))
+        # (weight, bias) of a Linear layer, None for a Tanh, else the module itself
+        self.layers = [
+            (m.weight.detach(), m.bias.detach()) if isinstance(m, torch.nn.Linear)
+            else None if isinstance(m, torch.nn.Tanh) else m
+            for m in mlp
+        ]  # fmt: skip
         with torch.no_grad():
             if self.kind == "discrete":
                 learned = agent.unconditional_logits()
@@ -153,39 +257,74 @@ class GuidedPolicy:
                 self.low = torch.as_tensor(probe.action_space.low, dtype=torch.float32)
                 self.high = torch.as_tensor(probe.action_space.high, dtype=torch.float32)
                 probe.close()
+        self.null_np = self.null.numpy()
+        if self.kind != "discrete":
+            self.std_np, self.low_np, self.high_np = self.std.numpy(), self.low.numpy(), self.high.numpy()
 
-    @torch.no_grad()
+    def conditional(self, raw_obs: np.ndarray) -> np.ndarray:
+        """The conditional branch (logits or means), float32, one row per observation.
+
+        The forward runs on at least MIN_FORWARD_ROWS rows (padded with copies of the first), and its
+        input lies in memory that torch allocated (64-byte aligned), so that the shapes and the
+        alignment of every product are a function of the row count alone. A row's result depends on
+        its own values, the row count and its position in the batch, never on the other rows'
+        values (no matrix product mixes rows)."""
+        rows = len(raw_obs)
+        x = torch.empty(max(rows, MIN_FORWARD_ROWS), self.in_features)
+        view = x.numpy()
+        view[:rows] = raw_obs if self.kind == "discrete" else self.agent.obs_norm(raw_obs).numpy()
+        view[rows:] = view[0]
+        for layer in self.layers:
+            if layer is None:
+                x = torch.tanh(x)
+            elif isinstance(layer, tuple):
+                x = torch.nn.functional.linear(x, *layer)
+            else:
+                with torch.no_grad():
+                    x = layer(x)
+        return x.numpy()[:rows]
+
+    @staticmethod
+    def coefficients(guidance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The float32 weights (1 - γ, γ) of the two branches, one row per observation."""
+        guidance = np.asarray(guidance, dtype=np.float64)[:, None]
+        return (1.0 - guidance).astype(np.float32), guidance.astype(np.float32)
+
+    def guided_numpy(self, raw_obs: np.ndarray, guidance: np.ndarray, coefficients=None) -> np.ndarray:
+        coef_null, coef_cond = coefficients or self.coefficients(guidance)
+        return coef_null * self.null_np + coef_cond * self.conditional(raw_obs)
+
     def guided(self, raw_obs: np.ndarray, guidance: np.ndarray) -> torch.Tensor:
         """Guided logits (discrete) or guided means (continuous), one row per observation."""
-        rows = len(raw_obs)
-        padded = np.concatenate([raw_obs, np.repeat(raw_obs[:1], max(0, MIN_FORWARD_ROWS - rows), 0)])
-        if self.kind == "discrete":
-            cond = self.agent.actor(torch.as_tensor(padded, dtype=torch.float32))[:rows]
-        else:
-            cond = self.agent.actor_mean(self.agent.obs_norm(padded))[:rows]
-        coef_null = torch.as_tensor(1.0 - guidance, dtype=torch.float32).unsqueeze(-1)
-        coef_cond = torch.as_tensor(guidance, dtype=torch.float32).unsqueeze(-1)
-        return coef_null * self.null + coef_cond * cond
+        return torch.from_numpy(self.guided_numpy(raw_obs, guidance))
 
-    def act(self, raw_obs: np.ndarray, guidance: np.ndarray, noise: np.ndarray, deterministic: bool) -> np.ndarray:
-        """Actions for a batch; `noise` holds one uniform (discrete: per action) or standard normal
-        (continuous: per action dimension) draw per row, used unless deterministic."""
-        guided = self.guided(raw_obs, guidance)
+    def act(self, raw_obs: np.ndarray, guidance: np.ndarray, noise: np.ndarray, deterministic: bool,
+            coefficients=None) -> np.ndarray:  # fmt: skip
+        """Actions for a batch; `noise` holds one row of episode_noise per observation: standard
+        Gumbel noise per action (discrete) or standard normal noise per action dimension
+        (continuous), used unless deterministic. `coefficients`: self.coefficients(guidance), where
+        the caller has them."""
+        guided = self.guided_numpy(raw_obs, guidance, coefficients)
+        noise = np.asarray(noise, dtype=np.float32)
         if self.kind == "discrete":
             if not deterministic:
-                guided = guided - torch.log(-torch.log(torch.as_tensor(noise, dtype=torch.float32)))
-            return guided.argmax(-1).numpy()
+                guided += noise
+            return guided.argmax(-1)
         if not deterministic:
-            guided = guided + self.std * torch.as_tensor(noise, dtype=torch.float32)
-        return torch.maximum(torch.minimum(guided, self.high), self.low).numpy()
+            guided += self.std_np * noise
+        return np.maximum(np.minimum(guided, self.high_np), self.low_np)
 
 
 def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
-    """The action noise of one evaluation episode, (horizon, action_size); the same for every γ."""
+    """The action noise of one evaluation episode, (horizon, action_size) float32; the same for every
+    γ and computed per episode, so its bits never depend on which episodes are evaluated with it.
+    Discrete: standard Gumbel noise (argmax of logits + noise samples the categorical); continuous:
+    standard normal."""
     rng = np.random.default_rng([eval_seed + episode, 1])
     if kind == "discrete":
-        return rng.uniform(np.finfo(np.float32).tiny, 1.0, size=(horizon, action_size))
-    return rng.standard_normal(size=(horizon, action_size))
+        uniform = rng.uniform(np.finfo(np.float32).tiny, 1.0, size=(horizon, action_size))
+        return (-np.log(-np.log(uniform))).astype(np.float32)
+    return rng.standard_normal(size=(horizon, action_size)).astype(np.float32)
 
 
 def make_eval_env(ckpt: dict):
@@ -199,38 +338,59 @@ def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
     return horizon, size
 
 
-def evaluate_batched(policy: GuidedPolicy, ckpt, gammas, episodes, eval_seed, deterministic):
-    """All episodes of all γ values together; returns (returns, lengths), each (len(gammas), episodes),
-    and the number of environment steps taken."""
-    n = len(gammas) * episodes
-    envs = [make_eval_env(ckpt) for _ in range(n)]
+def cell_rows(episodes: int) -> int:
+    """The row count of every policy forward of a cell of `episodes` episodes (GuidedPolicy.conditional)."""
+    return max(episodes, MIN_FORWARD_ROWS)
+
+
+def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_seed: int, deterministic: bool):
+    """One (checkpoint, γ) cell: its episodes step together, one row each, in a batch of their own.
+    Returns (returns, lengths), each of shape (episodes,).
+
+    An episode that ends keeps its row (holding its last observation) until the whole cell is done,
+    so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the first
+    step to the last. What a cell computes is then a function of the checkpoint, γ and the settings
+    alone: the same operations on the same shapes, whichever other cells are swept, in which order,
+    in which process, or whether the sweep was resumed. It does not rest on how a BLAS rounds
+    products of different row counts (MKL with AVX-512 rounds a 16-row product differently from an
+    8-row one)."""
+    envs = [make_eval_env(ckpt) for _ in range(episodes)]
     horizon, action_size = horizon_and_action_size(envs[0], ckpt)
-    noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)])
-    guidance = np.repeat(np.asarray(gammas, dtype=np.float64), episodes)
-    episode_of = np.tile(np.arange(episodes), len(gammas))
-    obs = np.stack([env.reset(seed=eval_seed + int(episode_of[i]))[0] for i, env in enumerate(envs)])
-    returns, lengths = np.zeros(n), np.zeros(n, dtype=np.int64)
-    active = np.arange(n)
+    # (horizon, episodes, action_size): the noise of time step t is one contiguous block.
+    noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)], axis=1)
+    guidance = np.full(episodes, float(gamma))
+    obs = np.stack([env.reset(seed=eval_seed + k)[0] for k, env in enumerate(envs)])
+    returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
+    running = np.ones(episodes, dtype=bool)
     t = 0
-    while active.size:
-        actions = policy.act(obs[active], guidance[active], noise[episode_of[active], t], deterministic)
-        still_running = []
-        for i, action in zip(active, actions):
-            obs[i], reward, terminated, truncated, _ = envs[i].step(action)
+    coefficients = policy.coefficients(guidance)
+    while running.any():
+        actions = policy.act(obs, guidance, noise[t], deterministic, coefficients)
+        for i in np.flatnonzero(running):
+            obs[i], reward, terminated, truncated, _ = envs[i].step(actions[i])
             returns[i] += reward
             lengths[i] += 1
-            if not (terminated or truncated):
-                still_running.append(i)
-        active = np.asarray(still_running, dtype=np.int64)
+            if terminated or truncated:
+                running[i] = False
         t += 1
     for env in envs:
         env.close()
-    return returns.reshape(len(gammas), episodes), lengths.reshape(len(gammas), episodes), int(lengths.sum())
+    return returns, lengths
+
+
+def evaluate_batched(policy: GuidedPolicy, ckpt, gammas, episodes, eval_seed, deterministic):
+    """The cells of several γ values of one checkpoint, one after the other (evaluate_cell); returns
+    (returns, lengths), each (len(gammas), episodes), and the number of environment steps taken."""
+    cells = [evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, deterministic) for gamma in gammas]
+    returns = np.stack([r for r, _ in cells]).reshape(len(gammas), episodes)
+    lengths = np.stack([n for _, n in cells]).reshape(len(gammas), episodes)
+    return returns, lengths, int(lengths.sum())
 
 
 def evaluate_sequential(policy: GuidedPolicy, ckpt, gamma, episodes, eval_seed, deterministic):
     """Reference: one environment, one episode after another, one observation per forward.
-    Same seeds and noise as evaluate_batched; used by the tests and the benchmark."""
+    Same seeds and noise as evaluate_cell; used by the tests and the benchmark. It agrees with the
+    cells to rounding, not necessarily to the bit (see the module docstring)."""
     env = make_eval_env(ckpt)
     horizon, action_size = horizon_and_action_size(env, ckpt)
     returns, lengths = [], []
@@ -254,66 +414,70 @@ def evaluate_sequential(policy: GuidedPolicy, ckpt, gamma, episodes, eval_seed, 
 @dataclass(frozen=True)
 class Job:
     checkpoint: Path
-    gammas: tuple[float, ...]  # the γ values of this checkpoint whose cells are missing
+    gamma: float
     settings: tuple  # (episodes, eval_seed, deterministic, uniform_null)
+
+
+@dataclass
+class JobResult:
+    job: Job
+    digest: str | None  # sha1 of the checkpoint bytes that were evaluated
+    rows: list[dict]
+    env_steps: int
+    error: str | None
 
 
 def settings_of(args: Args) -> tuple:
     return (args.episodes, args.eval_seed, args.deterministic, args.uniform_null)
 
 
-@functools.lru_cache(maxsize=None)
-def content_digest(checkpoint: Path, size: int, mtime_ns: int) -> str:
-    """sha1 of the file, read once per sweep however many γ cells ask; size and mtime are in the
-    cache key only, so that a checkpoint rewritten during the process is read again."""
-    return hashlib.sha1(checkpoint.read_bytes()).hexdigest()
+def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple, digest: str | None = None) -> Path:
+    """One file per (checkpoint, γ, settings). The checkpoint's bytes (`digest`, their sha1; read
+    from the file if not given), not its path or timestamp, are its identity: a retrained run is
+    never mistaken for the one evaluated before, and a run directory copied to another machine or
+    folder keeps its finished cells."""
+    if digest is None:
+        digest = hashlib.sha1(Path(checkpoint).read_bytes()).hexdigest()
+    key = f"{digest}|{gamma!r}|{settings!r}|{EVALUATOR_REVISION}"
+    name = hashlib.sha1(key.encode()).hexdigest()[:16]
+    return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{name}.csv"
 
 
-def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple) -> Path:
-    """One file per (checkpoint, γ, settings). The checkpoint's bytes, not its path or timestamp, are
-    its identity: a retrained run is never mistaken for the one evaluated before, and a run directory
-    copied to another machine or folder keeps its finished cells."""
-    stat = checkpoint.stat()
-    content = content_digest(checkpoint.resolve(), stat.st_size, stat.st_mtime_ns)
-    key = f"{content}|{gamma!r}|{settings!r}|{EVALUATOR_REVISION}"
-    digest = hashlib.sha1(key.encode()).hexdigest()[:16]
-    return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{digest}.csv"
-
-
-def run_job(job: Job):
-    """Evaluates the missing cells of one checkpoint; returns (job, {γ: rows}, env steps, error)."""
+def run_job(job: Job) -> JobResult:
+    """Evaluates one cell. The checkpoint is read once; the rows, and the digest that names their
+    cell, come from those bytes."""
     torch.set_num_threads(1)
     episodes, eval_seed, deterministic, uniform_null = job.settings
     try:
-        agent, ckpt = load_any_checkpoint(job.checkpoint)
+        digest, ckpt = read_checkpoint(job.checkpoint)
+        agent = TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, job.checkpoint)
+        config = config_label(ckpt)
     except Exception as e:
-        return job, {}, 0, f"{job.checkpoint}: {e}"
+        return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     if uniform_null and ckpt["action_space"] != "discrete":
-        return job, {}, 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only"
+        return JobResult(job, digest, [], 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
-    returns, lengths, env_steps = evaluate_batched(policy, ckpt, job.gammas, episodes, eval_seed, deterministic)
+    returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
     train_args = ckpt["args"]
     common = {
         "env_id": ckpt["env_id"],
         "variant": variant_label(train_args["guidance"], train_args["cond_dropout"]),
+        "config": config,
         "run": job.checkpoint.parent.parent.name,
         "seed": train_args["seed"],
         "train_guidance": train_args["guidance"],
         "cond_dropout": train_args["cond_dropout"],
         "step": ckpt["step_mark"],
         "global_step": ckpt["global_step"],
+        "eval_guidance": job.gamma,
         "policy": "deterministic" if deterministic else "sample",
         "null_branch": "uniform" if uniform_null else "learned",
     }
-    rows = {
-        gamma: [
-            {**common, "eval_guidance": gamma, "episode": k, "episode_seed": eval_seed + k,
-             "return": float(returns[g, k]), "length": int(lengths[g, k])}
-            for k in range(episodes)
-        ]
-        for g, gamma in enumerate(job.gammas)
-    }  # fmt: skip
-    return job, rows, env_steps, None
+    rows = [
+        {**common, "episode": k, "episode_seed": eval_seed + k, "return": float(returns[k]), "length": int(lengths[k])}
+        for k in range(episodes)
+    ]  # fmt: skip
+    return JobResult(job, digest, rows, int(lengths.sum()), None)
 
 
 def write_csv_atomic(path: Path, columns: list[str], rows: list[dict]) -> None:
@@ -348,19 +512,46 @@ def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tup
     return mean, float((high - low) / 2), float(low), float(high)
 
 
+GROUP_COLUMNS = SUMMARY_COLUMNS[:9]  # a summary row per (env, variant, config, ..., γ, policy, null branch)
+
+
+def config_of(row: dict) -> str:
+    """A row's configuration; rows of sweeps from before the config column count as their variant's
+    default configuration."""
+    return str(row.get("config") or row["variant"])
+
+
 def summarise(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_000) -> list[dict]:
-    """One row per (env, variant, step, γ, policy, null branch): statistics over seeds of the per-seed
-    mean episodic return."""
+    """One row per (env, variant, config, step, γ, policy, null branch): statistics over seeds of the
+    per-seed mean episodic return. A seed must be one run: InputError where two runs (the `run`
+    column) give the same seed of one group, or one run gives the same episode twice."""
     per_seed = defaultdict(lambda: defaultdict(list))
+    run_of, episodes_seen = {}, set()
     for row in rows:
-        key = tuple(str(row[c]) for c in SUMMARY_COLUMNS[:8])
-        per_seed[key][str(row["seed"])].append(float(row["return"]))
+        key = tuple(config_of(row) if c == "config" else str(row[c]) for c in GROUP_COLUMNS)
+        seed = str(row["seed"])
+        if "run" in row:
+            run = run_of.setdefault((key, seed), str(row["run"]))
+            if run != str(row["run"]):
+                raise InputError(
+                    f"runs {run} and {row['run']} would both count as seed {seed} of {key[0]} {key[2]!r} at step "
+                    f"{key[5]}: a seed must be one run (sweep or plot them separately)"
+                )
+            if "episode" in row:
+                episode = (key, seed, str(row["episode"]))
+                if episode in episodes_seen:
+                    raise InputError(
+                        f"episode {row['episode']} of run {run} ({key[0]} {key[2]!r}, step {key[5]}, γ {key[6]}) "
+                        "appears twice: the same cell from two sweeps?"
+                    )
+                episodes_seen.add(episode)
+        per_seed[key][seed].append(float(row["return"]))
     out = []
-    for key in sorted(per_seed, key=lambda k: (k[0], k[1], int(k[4]), float(k[5]), k[6], k[7])):
+    for key in sorted(per_seed, key=lambda k: (k[0], k[1], k[2], int(k[5]), float(k[6]), k[7], k[8])):
         seed_means = [float(np.mean(v)) for _, v in sorted(per_seed[key].items())]
         mean, half, low, high = mean_ci95(seed_means, method, bootstrap_samples)
         out.append({
-            **dict(zip(SUMMARY_COLUMNS[:8], key)),
+            **dict(zip(GROUP_COLUMNS, key)),
             "n_seeds": len(seed_means), "n_episodes": sum(len(v) for v in per_seed[key].values()),
             "mean": round(mean, 4), "ci95": round(half, 4), "ci_low": round(low, 4), "ci_high": round(high, 4),
             "ci_method": method, "seed_means": ";".join(f"{m:.4f}" for m in seed_means),
@@ -369,7 +560,7 @@ def summarise(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_0
 
 
 def episode_sort_key(row: dict):
-    return (row["env_id"], row["variant"], row["run"], int(row["step"]), float(row["eval_guidance"]),
+    return (row["env_id"], row["variant"], config_of(row), row["run"], int(row["step"]), float(row["eval_guidance"]),
             row["policy"], row["null_branch"], int(row["episode"]))  # fmt: skip
 
 
@@ -378,11 +569,121 @@ def format_duration(seconds: float) -> str:
     return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
 
 
+MAX_GUIDANCE = 1000.0
+
+
+def guidance_error(value: float, flag: str) -> str | None:
+    """The training scripts' rule for a guidance strength (theirs where they have it)."""
+    theirs = getattr(ppo_pgg_discrete, "guidance_error", None)
+    if theirs is not None:
+        return theirs(value, flag)
+    if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
+        return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
+    return None
+
+
 def check_args(args: Args) -> None:
-    if args.gammas is not None and not all(math.isfinite(g) for g in args.gammas):
-        raise InputError(f"--gammas must be finite numbers, got {list(args.gammas)}")
+    """Every argument, before anything is read or written; InputError with one line."""
+    if not args.paths:
+        raise InputError("no run directories, roots or checkpoint files given (e.g. eval_gamma_sweep.py runs/)")
+    if args.gammas is not None:
+        if not args.gammas:
+            raise InputError("--gammas needs at least one value (leave it out for the paper's)")
+        for gamma in args.gammas:
+            if error := guidance_error(gamma, "--gammas"):
+                raise InputError(error)
+    if args.steps is not None and not args.steps:
+        raise InputError("--steps needs at least one value (leave it out for every checkpoint)")
     if args.episodes <= 0 or args.workers <= 0 or args.bootstrap_samples <= 0:
         raise InputError("--episodes, --workers and --bootstrap-samples must be positive")
+    if args.eval_seed < 0:
+        raise InputError(f"--eval-seed must be >= 0, got {args.eval_seed}")
+    if not args.output:
+        raise InputError("--output must name a directory")
+
+
+# --- the sweep -----------------------------------------------------------------------------------------
+
+
+class SweepInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep; its message says how many of the sweep's cells are on disk."""
+
+
+def claim_output(output: Path):
+    """Creates the output directory, checks that it is writable, and takes an exclusive lock on it
+    (flock on <output>/.lock, released when the returned file is closed or its holder dies).
+    InputError with one line if it cannot be written or another sweep holds it."""
+    try:
+        (output / "cells").mkdir(parents=True, exist_ok=True)
+        lock = open(output / ".lock", "a+")
+    except OSError as e:
+        raise InputError(f"cannot write to {output}: {e.strerror or e}") from None
+    try:
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        lock.seek(0)
+        holder = lock.read().strip()
+        lock.close()
+        raise InputError(f"{output} is in use by another sweep{f' (pid {holder})' if holder.isdigit() else ''}; "
+                         "wait for it to finish or choose another --output") from None  # fmt: skip
+    try:
+        for directory in (output, output / "cells"):  # os.replace needs the directories writable
+            probe = directory / f".probe.{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        lock.truncate(0)
+        lock.write(str(os.getpid()))
+        lock.flush()
+    except OSError as e:
+        lock.close()
+        raise InputError(f"cannot write to {output}: {e.strerror or e}") from None
+    return lock
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def init_worker(parent_pid: int) -> None:
+    """Pool initializer: a worker leaves Ctrl-C to the parent (which ends the workers), and dies with
+    the parent however the parent dies (Linux: the kernel sends SIGTERM when it exits)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not a handler inherited from the parent
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent_pid:  # the parent died before prctl
+        os._exit(1)
+
+
+def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) -> dict:
+    """{(checkpoint, γ): cell path} of every cell the sweep asks for. Reads each checkpoint once;
+    unreadable ones go to `skipped`. InputError if two checkpoints are the same experiment, seed and
+    step (two runs that would count as one seed)."""
+    settings, cells, experiments = settings_of(args), {}, {}
+    for checkpoint in checkpoints:
+        try:
+            digest, ckpt = read_checkpoint(checkpoint)
+            train_args = ckpt["args"]
+            identity = (ckpt["env_id"], config_label(ckpt), train_args["guidance"], train_args["cond_dropout"],
+                        train_args["seed"], ckpt["step_mark"])  # fmt: skip
+            kind = ckpt["action_space"]
+        except ValueError as e:  # read_checkpoint's: unreadable, or not a checkpoint of these scripts
+            skipped.append(f"{checkpoint}: {e}")
+            continue
+        except Exception as e:  # a checkpoint dict without a field the sweep needs
+            skipped.append(f"{checkpoint}: not a PGG checkpoint ({type(e).__name__}: {e})")
+            continue
+        other = experiments.setdefault(identity, checkpoint)
+        if other != checkpoint:
+            raise InputError(
+                f"{other} and {checkpoint} are two runs of one experiment ({identity[0]}, {identity[1]!r}, seed "
+                f"{identity[4]}, step {identity[5]}) and would count as one seed; sweep them separately or remove one"
+            )
+        for gamma in dict.fromkeys(args.gammas if args.gammas is not None else PAPER_GAMMAS[kind]):
+            cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest)
+    return cells
 
 
 def sweep(args: Args) -> Path:
@@ -390,51 +691,39 @@ def sweep(args: Args) -> Path:
     check_args(args)
     output = Path(args.output)
     checkpoints = discover_checkpoints(args.paths, args.steps)
-    settings = settings_of(args)
-    skipped, jobs, wanted_cells = [], [], []
-    for checkpoint in checkpoints:
-        try:
-            kind = torch.load(checkpoint, map_location="cpu", weights_only=True)["action_space"]
-            gammas = args.gammas if args.gammas is not None else PAPER_GAMMAS[kind]
-        except Exception as e:
-            skipped.append(f"{checkpoint}: unreadable or not a PGG checkpoint ({type(e).__name__})")
-            continue
-        cells = {gamma: cell_path(output, checkpoint, gamma, settings) for gamma in dict.fromkeys(gammas)}
-        wanted_cells.extend(cells.values())
-        missing = tuple(g for g, path in cells.items() if not path.exists())
-        if missing:
-            jobs.append(Job(checkpoint, missing, settings))
-
-    total_cells = sum(len(job.gammas) for job in jobs)
-    print(f"{len(checkpoints)} checkpoints, {len(wanted_cells)} cells, {len(wanted_cells) - total_cells} already done", file=sys.stderr)
-    done_cells, env_steps, start = 0, 0, time.time()
-    pool = multiprocessing.get_context("fork").Pool(args.workers) if args.workers > 1 else None
+    lock = claim_output(output)
+    threads = torch.get_num_threads()
     try:
-        results = pool.imap_unordered(run_job, jobs) if pool else map(run_job, jobs)
-        for job, rows, steps, error in results:
-            if error:
-                skipped.append(error)
-                total_cells -= len(job.gammas)
-                continue
-            for gamma, cell_rows in rows.items():
-                write_csv_atomic(cell_path(output, job.checkpoint, gamma, settings), EPISODE_COLUMNS, cell_rows)
-            done_cells += len(rows)
-            env_steps += steps
-            elapsed = time.time() - start
-            eta = elapsed / done_cells * (total_cells - done_cells)
-            print(f"[{done_cells}/{total_cells} cells] {env_steps / elapsed:,.0f} env steps/s, "
-                  f"elapsed {format_duration(elapsed)}, ETA {format_duration(eta)}", file=sys.stderr, flush=True)  # fmt: skip
+        return sweep_locked(args, output, checkpoints)
     finally:
-        if pool:
-            pool.close()
-            pool.join()
+        torch.set_num_threads(threads)  # run_job sets one thread per process
+        lock.close()
 
-    rows = [row for path in wanted_cells if path.exists() for row in read_csv(path)]
-    rows.sort(key=episode_sort_key)
-    write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
-    summary = summarise(rows, args.ci, args.bootstrap_samples)
-    write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
-    write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
+
+def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
+    skipped = []
+    cells = plan(args, checkpoints, output, skipped)
+    try:
+        done = sum(path.exists() for path in cells.values())
+        print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {done} already done", file=sys.stderr)
+        changed = evaluate_missing(args, output, cells, skipped)
+        for checkpoint in sorted(changed):
+            skipped.append(f"{checkpoint}: rewritten during the sweep; rerun the sweep to evaluate its new contents")
+        rows = []
+        for (checkpoint, _), path in cells.items():
+            if path.exists() and checkpoint not in changed:
+                rows.extend(read_csv(path))
+        rows.sort(key=episode_sort_key)
+        summary = summarise(rows, args.ci, args.bootstrap_samples)
+        write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
+        write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
+        write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
+    except KeyboardInterrupt:
+        kept = sum(path.exists() for path in cells.values())
+        raise SweepInterrupted(
+            f"{kept} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "
+            "rerun the same command to evaluate the rest"
+        ) from None
     for reason in skipped:
         print(f"skipped {reason}", file=sys.stderr)
     print(f"wrote {output / 'episodes.csv'} ({len(rows)} episodes), {output / 'summary.csv'} ({len(summary)} rows)"
@@ -444,6 +733,43 @@ def sweep(args: Args) -> Path:
     return output
 
 
+def evaluate_missing(args: Args, output: Path, cells: dict, skipped: list[str]) -> set[Path]:
+    """Evaluates the cells not yet on disk, writing each as it finishes; returns the checkpoints
+    whose bytes changed since `cells` was planned."""
+    settings = settings_of(args)
+    jobs = [Job(checkpoint, gamma, settings) for (checkpoint, gamma), path in cells.items() if not path.exists()]
+    total_cells = len(jobs)
+    done_cells, env_steps, start, changed = 0, 0, time.time(), set()
+    pool = None
+    try:
+        if args.workers > 1 and len(jobs) > 1:
+            context = multiprocessing.get_context("fork")
+            pool = context.Pool(min(args.workers, len(jobs)), initializer=init_worker, initargs=(os.getpid(),))
+        for result in pool.imap_unordered(run_job, jobs) if pool else map(run_job, jobs):
+            job = result.job
+            if result.error:
+                skipped.append(result.error)
+                total_cells -= 1
+                continue
+            # Named by the bytes that were evaluated. A checkpoint rewritten since the plan keeps its new
+            # cell for a later sweep; this sweep reports none of its cells (they could mix two files).
+            path = cell_path(output, job.checkpoint, job.gamma, settings, result.digest)
+            write_csv_atomic(path, EPISODE_COLUMNS, result.rows)
+            if path != cells[(job.checkpoint, job.gamma)]:
+                changed.add(job.checkpoint)
+            done_cells += 1
+            env_steps += result.env_steps
+            elapsed = time.time() - start
+            eta = elapsed / done_cells * (total_cells - done_cells)
+            print(f"[{done_cells}/{total_cells} cells] {env_steps / max(elapsed, 1e-9):,.0f} env steps/s, "
+                  f"elapsed {format_duration(elapsed)}, ETA {format_duration(eta)}", file=sys.stderr, flush=True)  # fmt: skip
+    finally:
+        if pool:
+            pool.terminate()
+            pool.join()
+    return changed
+
+
 def main() -> None:
     args = tyro.cli(Args)
     try:
@@ -451,6 +777,13 @@ def main() -> None:
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
+    except KeyboardInterrupt as e:
+        print(f"interrupted: {e}" if isinstance(e, SweepInterrupted) else "interrupted before any cell was evaluated",
+              file=sys.stderr)  # fmt: skip
+        sys.exit(130)
+    except OSError as e:  # e.g. the disk filled up during the sweep
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(1)
 
 
 if __name__ == "__main__":
