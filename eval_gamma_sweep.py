@@ -2,6 +2,7 @@
 
     python eval_gamma_sweep.py runs/ --output sweeps/all
     python eval_gamma_sweep.py runs/discrete --gammas 1 2 5 --steps 100000 500000 --workers 2
+    python eval_gamma_sweep.py RUN/checkpoints/step_000500000.pt --gammas 1 2 5 --video videos/   # watch the knob
 
 Every checkpoint under the given run directories (or roots) is evaluated at each γ for `--episodes`
 episodes. A (checkpoint, γ) cell is evaluated on its own: its episodes step together, one row each
@@ -113,6 +114,11 @@ class Args:
     """confidence interval over per-seed means: Student t, or a percentile bootstrap"""
     bootstrap_samples: int = 10_000
     """resamples for --ci bootstrap"""
+    video: str | None = None
+    """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder:
+    gamma_<γ>.mp4 and side_by_side.mp4, all from the same episode seed (needs the [video] extra)"""
+    video_episode: int = 0
+    """with --video: the episode to record, k (reset seed eval_seed + k, as episode k of a sweep cell)"""
 
 
 class InputError(Exception):
@@ -151,12 +157,6 @@ def variant_label(train_guidance: float, cond_dropout: float) -> str:
     return f"pgg_drop{cond_dropout:g}" if train_guidance == 1.0 else f"pgg_g{train_guidance:g}_drop{cond_dropout:g}"
 
 
-# Training arguments that change how a run is carried out, not what it trains. The training scripts
-# name theirs in RUN_ONLY_ARGS; this is the set for scripts from before that.
-RUN_ONLY_ARGS = frozenset({
-    "exp_name", "output_dir", "run_name", "track", "wandb_project_name", "wandb_entity", "checkpoint_interval",
-    "torch_threads", "compile", "torch_deterministic", "capture_video", "resume", "overwrite", "progress",
-})  # fmt: skip
 # Training arguments that a sweep's rows carry in columns of their own (env_id, seed) or in the variant.
 OWN_COLUMNS = frozenset({"env_id", "seed", "guidance", "cond_dropout"})
 
@@ -180,7 +180,7 @@ def config_label(ckpt: dict) -> str:
     E.g. `pgg_g1.1 learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`."""
     module = TRAINING_MODULES[ckpt["action_space"]]
     train_args, defaults = ckpt["args"], training_defaults(ckpt["action_space"])
-    excluded = frozenset(getattr(module, "RUN_ONLY_ARGS", RUN_ONLY_ARGS)) | OWN_COLUMNS
+    excluded = module.RUN_ONLY_ARGS | OWN_COLUMNS
     words = [variant_label(train_args["guidance"], train_args["cond_dropout"])]
     for key in sorted(defaults.keys() - excluded):
         value = train_args.get(key, defaults[key])
@@ -569,19 +569,6 @@ def format_duration(seconds: float) -> str:
     return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
 
 
-MAX_GUIDANCE = 1000.0
-
-
-def guidance_error(value: float, flag: str) -> str | None:
-    """The training scripts' rule for a guidance strength (theirs where they have it)."""
-    theirs = getattr(ppo_pgg_discrete, "guidance_error", None)
-    if theirs is not None:
-        return theirs(value, flag)
-    if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
-        return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
-    return None
-
-
 def check_args(args: Args) -> None:
     """Every argument, before anything is read or written; InputError with one line."""
     if not args.paths:
@@ -590,7 +577,7 @@ def check_args(args: Args) -> None:
         if not args.gammas:
             raise InputError("--gammas needs at least one value (leave it out for the paper's)")
         for gamma in args.gammas:
-            if error := guidance_error(gamma, "--gammas"):
+            if error := ppo_pgg_discrete.guidance_error(gamma, "--gammas"):  # the training scripts' rule
                 raise InputError(error)
     if args.steps is not None and not args.steps:
         raise InputError("--steps needs at least one value (leave it out for every checkpoint)")
@@ -770,9 +757,106 @@ def evaluate_missing(args: Args, output: Path, cells: dict, skipped: list[str]) 
     return changed
 
 
+# --- watching the knob: videos of one checkpoint at several γ ----------------------------------------
+
+
+def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, eval_seed: int, episode: int, deterministic: bool):
+    """Episode `episode` of a sweep cell at `gamma`, played one observation at a time (as
+    evaluate_sequential) with its frames; returns (frames, return)."""
+    env = gym.make(ckpt["env_id"], render_mode="rgb_array")
+    if ckpt["action_space"] == "continuous":
+        env = gym.wrappers.FlattenObservation(env)  # as the training script's make_env
+    horizon, action_size = horizon_and_action_size(env, ckpt)
+    noise = episode_noise(policy.kind, eval_seed, episode, horizon, action_size)
+    obs, _ = env.reset(seed=eval_seed + episode)
+    frames, total, t, done = [env.render()], 0.0, 0, False
+    while not done:
+        action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], deterministic)[0]
+        obs, reward, terminated, truncated, _ = env.step(action)
+        frames.append(env.render())
+        total, t, done = total + float(reward), t + 1, terminated or truncated
+    env.close()
+    return frames, total
+
+
+@functools.cache
+def label_font():
+    """DejaVu Sans, which matplotlib ships and which has a γ (PIL's built-in bitmap font has none)."""
+    import matplotlib
+    from PIL import ImageFont
+
+    return ImageFont.truetype(str(Path(matplotlib.get_data_path(), "fonts", "ttf", "DejaVuSans.ttf")), 20)
+
+
+def labelled(frame: np.ndarray, text: str) -> np.ndarray:
+    """`frame` with `text` written in its top-left corner and a grey line down its right edge."""
+    from PIL import Image, ImageDraw
+
+    image = Image.fromarray(frame)
+    draw = ImageDraw.Draw(image)
+    box = draw.textbbox((10, 8), text, font=label_font())
+    draw.rectangle((box[0] - 5, box[1] - 4, box[2] + 5, box[3] + 4), fill=(255, 255, 255))
+    draw.text((10, 8), text, fill=(0, 0, 0), font=label_font())
+    draw.line((image.width - 1, 0, image.width - 1, image.height), fill=(128, 128, 128), width=2)
+    return np.asarray(image)
+
+
+def write_video(path: Path, frames: list[np.ndarray], fps: float) -> None:
+    """An mp4 with exactly these frames (moviepy's clips can drop the last one to float rounding of
+    their duration), through imageio's ffmpeg, which the [video] extra brings; written atomically."""
+    import imageio.v2 as imageio
+
+    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")  # the suffix picks the format
+    with imageio.get_writer(tmp, fps=fps, macro_block_size=1) as writer:
+        for frame in frames:
+            writer.append_data(frame)
+    os.replace(tmp, path)
+
+
+def record_videos(args: Args) -> list[Path]:
+    """--video: one video per γ of one checkpoint, the same episode (seed and noise) in each, and all
+    of them side by side with γ and the return written on each panel (shorter episodes hold their
+    last frame). Returns the files written."""
+    checkpoints = discover_checkpoints(args.paths, args.steps)
+    if len(checkpoints) != 1:
+        raise InputError(f"--video records one checkpoint; {len(checkpoints)} found (name a checkpoint file, or narrow with --steps)")
+    try:
+        agent, ckpt = load_any_checkpoint(checkpoints[0])
+    except ValueError as e:
+        raise InputError(f"{checkpoints[0]}: {e}") from None
+    probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
+    error = TRAINING_MODULES[ckpt["action_space"]].video_error(probe)  # the training scripts' check: moviepy, a renderer
+    fps = probe.metadata.get("render_fps") or 30
+    probe.close()
+    if error:
+        raise InputError(error.replace("--capture-video", "--video"))
+    policy = GuidedPolicy(agent, ckpt, args.uniform_null)
+    output = Path(args.video)
+    output.mkdir(parents=True, exist_ok=True)
+    gammas = args.gammas if args.gammas is not None else PAPER_GAMMAS[ckpt["action_space"]]
+    written, panels = [], []
+    for gamma in gammas:
+        frames, total = record_episode(policy, ckpt, gamma, args.eval_seed, args.video_episode, args.deterministic)
+        write_video(output / f"gamma_{gamma:g}.mp4", frames, fps)
+        written.append(output / f"gamma_{gamma:g}.mp4")
+        panels.append([labelled(frame, f"γ = {gamma:g}   return {total:.1f}") for frame in frames])
+        print(f"γ = {gamma:g}: return {total:.1f} over {len(frames) - 1} steps -> {written[-1]}", file=sys.stderr)
+    longest = max(len(frames) for frames in panels)
+    side_by_side = [
+        np.concatenate([frames[min(t, len(frames) - 1)] for frames in panels], axis=1) for t in range(longest)
+    ]
+    write_video(output / "side_by_side.mp4", side_by_side, fps)
+    return [*written, output / "side_by_side.mp4"]
+
+
 def main() -> None:
     args = tyro.cli(Args)
     try:
+        if args.video is not None:
+            check_args(args)
+            for path in record_videos(args):
+                print(path)
+            return
         sweep(args)
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)

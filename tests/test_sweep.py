@@ -583,3 +583,49 @@ def test_a_killed_sweep_leaves_no_worker_and_no_lock(long_sweep, tmp_path):
     stderr = proc.stderr.read()
     assert "Traceback" not in stderr and "BrokenPipeError" not in stderr, stderr
     sweep.claim_output(output).close()  # the lock died with its holder
+
+
+# --- videos of the knob ----------------------------------------------------------------------------
+
+
+def frame_count(path: Path) -> int:
+    import imageio.v3 as iio
+
+    return sum(1 for _ in iio.imiter(path))
+
+
+def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
+    """One video per γ of episode k (its reset seed and noise, as in a sweep cell), each frame of it,
+    and a side-by-side video as long as the longest. The recorded episode is the sequential
+    reference's episode k: its length fixes the frame count."""
+    pytest.importorskip("moviepy", reason="--video needs the [video] extra")
+    pytest.importorskip("pygame", reason="CartPole renders with pygame (the [video] extra)")
+    path = checkpoint(runs, "discrete")
+    args = sweep.Args(paths=(str(path),), gammas=(1.0, 5.0), video=str(tmp_path / "videos"), video_episode=2)
+    written = sweep.record_videos(args)
+    assert [p.name for p in written] == ["gamma_1.mp4", "gamma_5.mp4", "side_by_side.mp4"]
+    agent, ckpt = sweep.load_any_checkpoint(path)
+    policy = sweep.GuidedPolicy(agent, ckpt)
+    lengths = [int(sweep.evaluate_sequential(policy, ckpt, gamma, 3, args.eval_seed, False)[1][2]) for gamma in (1.0, 5.0)]
+    assert [frame_count(p) for p in written] == [lengths[0] + 1, lengths[1] + 1, max(lengths) + 1]
+    assert not list((tmp_path / "videos").glob(".*tmp*"))
+
+
+def test_video_of_several_checkpoints_is_one_line_of_error(runs, tmp_path):
+    proc = subprocess.run([*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")], capture_output=True, text=True, timeout=120)
+    lines = proc.stderr.strip().splitlines()
+    assert proc.returncode == 2 and len(lines) == 1 and "--video records one checkpoint; 4 found" in lines[0]
+    assert not (tmp_path / "v").exists()
+
+
+def test_video_of_a_mujoco_checkpoint_where_a_gl_backend_renders(runs, tmp_path):
+    pytest.importorskip("moviepy", reason="--video needs the [video] extra")
+    env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
+    probe = subprocess.run([sys.executable, "-c", "import gymnasium as g; e = g.make('Hopper-v4', render_mode='rgb_array'); e.reset(); e.render()"],
+                           capture_output=True, env=env, timeout=120)  # fmt: skip
+    if probe.returncode:
+        pytest.skip("MuJoCo cannot render headless here (apt-get install libosmesa6 for MUJOCO_GL=osmesa)")
+    proc = subprocess.run([*SCRIPT, str(checkpoint(runs, "continuous")), "--gammas", "1", "1.5", "--video", str(tmp_path / "v")],
+                          capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert frame_count(tmp_path / "v" / "side_by_side.mp4") >= max(frame_count(tmp_path / "v" / f"gamma_{g}.mp4") for g in ("1", "1.5"))
