@@ -96,18 +96,17 @@ class Args:
     output: str = "sweep"
     """output directory (cells/, episodes.csv, summary.csv); reusing it resumes a sweep"""
     gammas: tuple[float, ...] | None = None
-    """eval guidance strengths; default the paper's: discrete 1 1.5 2 5 10 20, continuous 1 1.05 ... 1.3 1.5"""
+    """eval guidance strengths; None: the paper's, discrete 1 1.5 2 5 10 20, continuous 1 1.05 ... 1.3 1.5"""
     episodes: int = 50
     """episodes per (checkpoint, γ) cell"""
     steps: tuple[int, ...] | None = None
-    """only the checkpoints of these step marks (e.g. 100000 500000); default all"""
+    """only the checkpoints of these step marks (e.g. 100000 500000); None: all"""
     eval_seed: int = 10_000
     """episode k resets with seed eval_seed + k; keep it away from training seeds"""
     deterministic: bool = False
     """control: act with the argmax / mean of the guided policy instead of sampling it"""
     uniform_null: bool = False
-    """control (discrete only): a uniform unconditional branch instead of the learned one, making
-    guidance plain temperature scaling of the conditional policy"""
+    """control (discrete only): a uniform unconditional branch instead of the learned one, making guidance plain temperature scaling of the conditional policy"""
     workers: int = 1
     """processes that evaluate checkpoints in parallel"""
     ci: Literal["t", "bootstrap"] = "t"
@@ -115,8 +114,7 @@ class Args:
     bootstrap_samples: int = 10_000
     """resamples for --ci bootstrap"""
     video: str | None = None
-    """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder:
-    gamma_<γ>.mp4 and side_by_side.mp4, all from the same episode seed (needs the [video] extra)"""
+    """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder: gamma_<γ>.mp4 and side_by_side.mp4, all from the same episode seed (needs the [video] extra); None: sweep"""
     video_episode: int = 0
     """with --video: the episode to record, k (reset seed eval_seed + k, as episode k of a sweep cell)"""
 

@@ -118,10 +118,9 @@ class Args:
     provenance: str | None = None
     """CSV naming, for each input CSV, the commits, MuJoCo version and machine behind it (results/provenance.csv)"""
     paper_layout: bool = True
-    """continuous figures in the paper's 2×3 layout, every task ("not run" where there is no data) and a
-    figure per paper variant; --no-paper-layout draws only what was swept"""
+    """continuous figures in the paper's 2×3 layout, every task ("not run" where there is no data) and a figure per paper variant; --no-paper-layout draws only what was swept"""
     response_step: int | None = None
-    """checkpoint step of the γ-response plot; default the last step of each env"""
+    """checkpoint step of the γ-response plot; None: the last step of each env"""
     policy: str = "sample"
     """which evaluation policy to report: sample or deterministic"""
     null_branch: str = "learned"

@@ -59,9 +59,7 @@ class Args:
     torch_threads: int = 1
     """torch intra-op threads; one thread is fastest for these small networks"""
     compile: bool = False
-    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): updates
-    ~1.6x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm,
-    rounded differently (README, Performance)"""
+    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): updates ~1.6x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm, rounded differently (README, Performance)"""
     track: bool = False
     """if toggled, track the run with Weights and Biases (needs `pip install wandb`)"""
     wandb_project_name: str = "pgg"
@@ -71,14 +69,13 @@ class Args:
     output_dir: str = "runs"
     """directory under which the run directory is created"""
     run_name: str | None = None
-    """run directory name; default `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
+    """run directory name; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
     resume: bool = False
     """continue the run in the run directory from its last checkpoint (start it if it has none)"""
     overwrite: bool = False
     """replace a run directory that holds checkpoints of a finished run or of other arguments"""
     capture_video: bool = False
-    """record videos of the first sub-env's episodes into `{run_dir}/videos` (needs the [video] extra
-    and, for MuJoCo, a GL backend: MUJOCO_GL=egl or osmesa)"""
+    """record videos of the first sub-env's episodes into `{run_dir}/videos` (needs the [video] extra and, for MuJoCo, a GL backend: MUJOCO_GL=egl or osmesa)"""
 
     # Algorithm arguments (CleanRL's continuous PPO defaults)
     env_id: str = "Hopper-v4"
@@ -126,8 +123,7 @@ class Args:
     cond_dropout: float = 0.0
     """probability that a sample's actor input is replaced by the null embedding during updates"""
     checkpoint_interval: int = 200_000
-    """save a checkpoint at the first iteration boundary past each multiple of this many steps (at
-    least one batch, num_envs * num_steps)"""
+    """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
 
 
 # Arguments that change where and how a run is recorded or how fast it runs, never what it learns

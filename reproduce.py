@@ -27,7 +27,7 @@ from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
 from dataclasses import dataclass
 from functools import cache
 from pathlib import Path
-from typing import Literal
+from typing import Annotated, Literal
 
 import gymnasium as gym
 import tyro
@@ -70,34 +70,38 @@ def training_module(env_id: str):
     return ppo_pgg_discrete if discrete else ppo_pgg_continuous
 
 
+# The help of a flag whose None means "take it from the preset" (tyro would print "(default: None)").
+FROM_PRESET = tyro.conf.arg(help_behavior_hint="(default: the preset's)")
+FROM_PRESET_OR_PAPER = tyro.conf.arg(help_behavior_hint="(default: the preset's, else the paper's)")
+
+
 @dataclass
 class Args:
     preset: Literal["quick", "discrete", "continuous"] = "quick"
     """the grid to run; the flags below override its parts"""
-    envs: tuple[str, ...] | None = None
-    """environments (default: the preset's)"""
-    seeds: int | None = None
-    """number of seeds, 1..N (default: the preset's)"""
-    variants: tuple[Literal["ppo", "pgg_g1.1", "pgg_drop0.1"], ...] | None = None
-    """training variants (default: all three)"""
-    total_timesteps: int | None = None
-    """training steps per run (default: the preset's, else the paper's)"""
-    checkpoint_interval: int | None = None
-    """steps between checkpoints (default: the preset's, else the paper's)"""
-    gammas: tuple[float, ...] | None = None
-    """eval guidance values of the sweep (default: the preset's, else the paper's)"""
-    episodes: int | None = None
+    envs: Annotated[tuple[str, ...] | None, FROM_PRESET] = None
+    """environments"""
+    seeds: Annotated[int | None, FROM_PRESET] = None
+    """number of seeds, 1..N"""
+    variants: Annotated[tuple[Literal["ppo", "pgg_g1.1", "pgg_drop0.1"], ...] | None, FROM_PRESET] = None
+    """training variants (every preset has all three)"""
+    total_timesteps: Annotated[int | None, FROM_PRESET_OR_PAPER] = None
+    """training steps per run"""
+    checkpoint_interval: Annotated[int | None, FROM_PRESET_OR_PAPER] = None
+    """steps between checkpoints"""
+    gammas: Annotated[tuple[float, ...] | None, FROM_PRESET_OR_PAPER] = None
+    """eval guidance values of the sweep"""
+    episodes: Annotated[int | None, FROM_PRESET] = None
     """evaluation episodes per (checkpoint, γ) cell"""
-    root: str | None = None
-    """where the runs go (default runs/<preset>)"""
-    results: str | None = None
-    """where sweep CSVs, tables and figures go (default results/<preset>)"""
+    root: Annotated[str | None, tyro.conf.arg(help_behavior_hint="(default: runs/<preset>)")] = None
+    """where the runs go"""
+    results: Annotated[str | None, tyro.conf.arg(help_behavior_hint="(default: results/<preset>)")] = None
+    """where sweep CSVs, tables and figures go"""
     executor: Literal["local", "submitit-local", "slurm"] = "local"
-    """local: a process pool here; slurm: a submitit job array; submitit-local: submitit's local
-    executor, the same code path as slurm without a cluster"""
+    """local: a process pool here; slurm: a submitit job array; submitit-local: submitit's local executor, the same code path as slurm without a cluster"""
     workers: int = os.cpu_count() or 1
     """concurrent training runs (local) and sweep processes"""
-    slurm_partition: str | None = None
+    slurm_partition: Annotated[str | None, tyro.conf.arg(help_behavior_hint="(default: the cluster's)")] = None
     """Slurm partition"""
     slurm_time_min: int = 180
     """Slurm time limit per run, minutes"""
@@ -106,8 +110,7 @@ class Args:
     skip_training: bool = False
     """only sweep and plot what is already trained"""
     compile: bool = False
-    """train with --compile (needs a C++ compiler): ~1.25x faster training, whose compile pays back
-    after ~45k Hopper steps with inductor's cache warm, ~210k cold (README, Performance)"""
+    """train with --compile (needs a C++ compiler): ~1.25x faster training, whose compile pays back after ~45k Hopper steps with inductor's cache warm, ~210k cold (benchmarks/README.md)"""
 
 
 @dataclass(frozen=True)

@@ -90,13 +90,11 @@ LAUNCH = threading.Lock()
 @dataclass
 class Args:
     env_id: str = "CartPole-v1"
-    """a Discrete env runs ppo_pgg_discrete.py against CleanRL's ppo.py, a Box one ppo_pgg_continuous.py
-    against ppo_continuous_action.py"""
+    """a Discrete env runs ppo_pgg_discrete.py against CleanRL's ppo.py, a Box one ppo_pgg_continuous.py against ppo_continuous_action.py"""
     seeds: int = 8
     """seeds 1..N, the same for both implementations"""
     total_timesteps: int | None = None
-    """--total-timesteps of every run (default: the scripts' own, 500k discrete and 1M continuous; with
-    --analyse-only, that of the saved runs)"""
+    """--total-timesteps of every run (default: the scripts' own, 500k discrete and 1M continuous; with --analyse-only, that of the saved runs)"""
     cleanrl_dir: str | None = None
     """the folder holding CleanRL's ppo.py and ppo_continuous_action.py (cleanrl/ in its repository)"""
     cleanrl_python: str | None = None
