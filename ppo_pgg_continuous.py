@@ -273,19 +273,19 @@ def pickle_free(value):
     return value.item() if isinstance(value, np.generic) else value
 
 
-def env_state(envs) -> list[dict] | None:
-    """The state of every sub-env as plain values and tensors (pickle-free), or None for a task whose
-    state this cannot capture (then a resumed run starts fresh episodes)."""
+def env_state(envs) -> list[dict]:
+    """The state of every sub-env as plain values and tensors (pickle-free): its wrappers' counters and
+    statistics, its RNG and, where it is a classic-control or MuJoCo task, the task's own state
+    ("complete"; for other tasks a resumed run starts fresh episodes)."""
     states = []
     for env in envs.envs:
         task = env.unwrapped
-        if not (hasattr(task, "state") or hasattr(task, "data")):
-            return None
         layers = [
             {name: pickle_free(value) for name, value in vars(layer).items() if name in ENV_STATE_ATTRIBUTES}
             for layer in wrapper_chain(env)
         ]
-        states.append({"layers": layers, "rng": task.np_random.bit_generator.state})
+        complete = hasattr(task, "state") or hasattr(task, "data")
+        states.append({"layers": layers, "rng": task.np_random.bit_generator.state, "complete": complete})
         if hasattr(task, "data"):
             # MuJoCo: every array of mjData, not only the integration state. Quantities derived from
             # the state (body positions, contact forces) lag it by one step after mj_step, and some
@@ -717,9 +717,12 @@ def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> di
     }
 
 
-def checkpoint_marks(total_timesteps: int, interval: int) -> list[int]:
-    """Nominal steps that get a checkpoint: every multiple of `interval` below the total, and the total."""
-    return list(range(interval, total_timesteps, interval)) + [total_timesteps]
+def checkpoint_marks(total_timesteps: int, interval: int, batch_size: int) -> list[int]:
+    """Nominal steps that get a checkpoint: every multiple of `interval` below the total, and the total;
+    one per iteration (interval >= batch_size), so a multiple that the last iteration passes is left
+    to the total's checkpoint."""
+    last_iteration = -(-total_timesteps // batch_size)
+    return [m for m in range(interval, total_timesteps, interval) if -(-m // batch_size) < last_iteration] + [total_timesteps]
 
 
 def checkpoint_path(run_dir: Path, mark: int) -> Path:
@@ -863,11 +866,15 @@ def prepare_run_dir(args: Args) -> Path:
     before anything is deleted. Raises RunDirError (one line) or OSError (not writable)."""
     run_dir = Path(args.output_dir) / (args.run_name or default_run_name(args))
     run_dir.mkdir(parents=True, exist_ok=True)
-    if run_dir not in HELD_LOCKS:
-        HELD_LOCKS[run_dir] = lock_directory(run_dir)
+    if run_dir.resolve() not in HELD_LOCKS:
+        HELD_LOCKS[run_dir.resolve()] = lock_directory(run_dir)
     latest = latest_checkpoint(run_dir)
     if latest is not None and not args.overwrite:
-        check_continuable(run_dir, latest, args)
+        try:
+            check_continuable(run_dir, latest, args)
+        except RunDirError:
+            HELD_LOCKS.pop(run_dir.resolve()).close()
+            raise
     if not (args.resume and latest is not None):
         for stale in ("checkpoints", "videos"):
             shutil.rmtree(run_dir / stale, ignore_errors=True)
@@ -922,7 +929,7 @@ def train(args: Args, run_dir: Path) -> None:
         resumed = torch.load(latest, map_location="cpu", weights_only=True) if latest else None
         _train(args, run_dir, resumed)
     finally:
-        lock = HELD_LOCKS.pop(run_dir, None)
+        lock = HELD_LOCKS.pop(run_dir.resolve(), None)
         if lock is not None:
             lock.close()
 
@@ -953,7 +960,9 @@ def _train(args: Args, run_dir: Path, resumed: dict | None) -> None:
     torch.use_deterministic_algorithms(args.torch_deterministic)
     torch.set_num_threads(args.torch_threads)
 
-    video_dir = run_dir / "videos" if args.capture_video else None
+    # A resumed run records into a folder of its own: RecordVideo numbers episodes from 0 again.
+    video_dir = run_dir / "videos" / (f"from_step_{resumed['global_step']}" if resumed else "")
+    video_dir = video_dir if args.capture_video else None
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, video_dir)
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = Agent(obs_dim, action_dim, args.obs_clip)
@@ -987,16 +996,16 @@ def _train(args: Args, run_dir: Path, resumed: dict | None) -> None:
         state = resumed["resume"]
         agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
         optimizer.load_state_dict(state["optimizer"])
-        if state["envs"] is not None:
-            restore_env_state(envs, state["envs"])
+        restore_env_state(envs, state["envs"])
+        if all(sub_env["complete"] for sub_env in state["envs"]):
             next_obs, next_done = state["next_obs"].numpy().copy(), state["next_done"].numpy().copy()
-        else:  # a task whose state a checkpoint cannot hold: fresh episodes, a statistically equal run
+        else:  # a task whose own state a checkpoint cannot hold: fresh episodes, a statistically equal run
             raw_obs, _ = envs.reset(seed=args.seed + state["iteration"])
             next_obs = RolloutPolicy(agent, args.guidance).observe(raw_obs)
         set_rng_state(state["rng"])
         first_iteration, global_step = state["iteration"] + 1, resumed["global_step"]
         print(f"resuming from {latest_checkpoint(run_dir)} at global_step={global_step}", flush=True)
-    marks = deque(mark for mark in checkpoint_marks(args.total_timesteps, args.checkpoint_interval) if mark > global_step)
+    marks = deque(m for m in checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size) if m > global_step)
     progress = ProgressReport(num_iterations * batch_size, global_step)
 
     try:
@@ -1054,11 +1063,12 @@ def main() -> None:
     print(f"run directory: {run_dir}")
     try:
         train(args, run_dir)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, OSError) as e:  # Ctrl-C, or e.g. a full disk while saving a checkpoint
         latest = latest_checkpoint(run_dir)
         kept = f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
-        print(f"interrupted; {run_dir}: {kept}", file=sys.stderr)
-        sys.exit(130)
+        what = "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {e.strerror or e}"
+        print(f"{what}; {run_dir}: {kept}", file=sys.stderr)
+        sys.exit(130 if isinstance(e, KeyboardInterrupt) else 1)
 
 
 if __name__ == "__main__":

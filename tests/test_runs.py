@@ -10,6 +10,7 @@ import sys
 import time
 from dataclasses import replace
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -110,6 +111,68 @@ def test_format_one_checkpoints_load_for_evaluation_but_do_not_resume(tmp_path):
     assert path.exists()
 
 
+def test_one_checkpoint_per_saved_iteration():
+    """A mark that the last iteration passes is left to the total's checkpoint: interval 3900 of a
+    4000-step run of 512-step batches would otherwise write step_3900 and step_4000 at one point."""
+    assert ppo_pgg_discrete.checkpoint_marks(4000, 3900, 512) == [4000]
+    assert ppo_pgg_continuous.checkpoint_marks(2500, 1024, 256) == [1024, 2048, 2500]
+
+
+def test_a_failed_checkpoint_write_leaves_the_previous_ones_whole(tmp_path, monkeypatch):
+    """A checkpoint is written to a temporary file and renamed: a write that dies half way (full disk,
+    kill) leaves no step_*.pt behind and the earlier checkpoints as they were."""
+    args = small_args("discrete", tmp_path)
+    real_save = torch.save
+
+    def dies_at_the_second(payload, path):
+        if payload["step_mark"] == 1024:
+            with open(path, "wb") as f:
+                f.write(b"half a checkpoint")
+            raise OSError(28, "No space left on device")
+        real_save(payload, path)
+
+    monkeypatch.setattr(torch, "save", dies_at_the_second)
+    with pytest.raises(OSError):
+        train(ppo_pgg_discrete, args)
+    run_dir = tmp_path / ppo_pgg_discrete.default_run_name(args)
+    assert sorted(p.name for p in (run_dir / "checkpoints").glob("step_*.pt")) == ["step_000000512.pt"]
+    ppo_pgg_discrete.load_checkpoint(run_dir / "checkpoints" / "step_000000512.pt")
+
+
+class Drift(gym.Env):
+    """A task whose state is private (no `state`, no MuJoCo `data`): a checkpoint cannot hold it."""
+
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (1,), np.float64)
+    action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self._x = 0.0
+        return np.array([self._x]), {}
+
+    def step(self, action):
+        self._x += float(action[0])
+        return np.array([self._x]), 1.0 + self._x, False, False, {}
+
+
+def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
+    """Such a task is marked incomplete (a resumed run starts fresh episodes), but its wrappers'
+    statistics, here the reward scale, are still saved and restored."""
+    monkeypatch.setattr(ppo_pgg_continuous, "make_env", lambda env_id, video_dir=None: Drift)
+    envs = ppo_pgg_continuous.make_vector_env("Drift", 1, seed=0, discount=0.99, reward_clip=10.0)
+    envs.reset(seed=0)
+    for _ in range(5):
+        envs.step(np.full((1, 1), 0.5, np.float32))
+    states = ppo_pgg_continuous.env_state(envs)
+    assert states[0]["complete"] is False
+    fresh = ppo_pgg_continuous.make_vector_env("Drift", 1, seed=0, discount=0.99, reward_clip=10.0)
+    fresh.reset(seed=1)
+    ppo_pgg_continuous.restore_env_state(fresh, states)
+    saved, restored = (next(w for w in ppo_pgg_continuous.wrapper_chain(e.envs[0]) if isinstance(w, ppo_pgg_continuous.NormalizeClipReward))
+                       for e in (envs, fresh))  # fmt: skip
+    assert restored.return_count == saved.return_count == 1e-4 + 5 and restored.return_var == saved.return_var
+
+
 def test_checkpoint_records_the_software_stack(tmp_path):
     ckpt = checkpoint(ppo_pgg_discrete, train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
     assert ckpt["versions"]["torch"] == torch.__version__ and ckpt["versions"]["gymnasium"]
@@ -196,7 +259,7 @@ def test_progress_is_a_live_bar_in_a_terminal_and_plain_lines_in_a_log(tmp_path,
     flags = ["--output-dir", str(tmp_path), "--total-timesteps", "4096", "--checkpoint-interval", "4096"]
     command = [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags]
     controller, terminal = pty.openpty()
-    proc = subprocess.Popen(command, stdin=terminal, stdout=terminal, stderr=terminal, env=dict(os.environ, COLUMNS="120"))
+    proc = subprocess.Popen(command, stdin=terminal, stdout=terminal, stderr=terminal, env=dict(os.environ, COLUMNS="250"))
     os.close(terminal)
     output = b""
     while True:
