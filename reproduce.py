@@ -12,9 +12,10 @@ The grid is environments × seeds × training variants:
 Run directories are <root>/<env>__<variant>__s<seed>, logs <root>/logs/<run>.log. Rerunning the same
 command skips every run whose final checkpoint exists, resumes a half-finished run from its last
 checkpoint (bit for bit, see the training scripts' --resume) and skips every finished sweep cell, so
-killing the launcher, even with SIGKILL, loses at most the work since each run's last checkpoint: its
-training children die with it. Preempted Slurm array tasks are requeued and resume the same way. The
-sweep CSVs, tables and figures go to <results>.
+killing the launcher loses at most the work since each run's last checkpoint: its local training
+children die with it, even when it is SIGKILLed (Linux); SIGINT or SIGTERM also cancels submitit jobs.
+Preempted Slurm array tasks are requeued and resume the same way. The sweep CSVs, tables and figures
+go to <results>.
 """
 
 import ctypes
@@ -59,6 +60,7 @@ PRESETS = {
     "continuous": Preset(CONTINUOUS_TASKS, 5, tuple(VARIANTS), None, None, None, 50),
 }
 RUNNING: set[subprocess.Popen] = set()  # training children, ended with the launcher
+SUBMITTED: list = []  # submitit jobs (the same), cancelled by SIGINT / SIGTERM
 
 
 @cache
@@ -155,11 +157,19 @@ class RunSpec:
 LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform == "linux" else None  # loaded here, not after fork
 
 
-def die_with_parent() -> None:
-    """In a child before exec: the kernel kills it when the thread that started it ends, which a
-    launcher killed by SIGKILL cannot arrange itself (Linux; elsewhere only SIGINT/SIGTERM do)."""
-    if LIBC is not None:
-        LIBC.prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+def die_with(parent: int):
+    """For a child before exec (preexec_fn): the kernel kills it when the thread that started it ends,
+    which a launcher killed by SIGKILL cannot arrange itself (Linux; elsewhere only SIGINT/SIGTERM
+    do). If the launcher died before the signal was set, the child is already an orphan: it exits.
+    Only an async-signal-safe system call and getppid run between fork and exec."""
+
+    def set_death_signal() -> None:
+        if LIBC is not None:
+            LIBC.prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
+            if os.getppid() != parent:
+                os._exit(1)
+
+    return set_death_signal
 
 
 def train_one(spec: RunSpec) -> None:
@@ -170,7 +180,7 @@ def train_one(spec: RunSpec) -> None:
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     with open(spec.log, "a") as log:
         child = subprocess.Popen(
-            [*spec.command(), "--resume"], stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=die_with_parent
+            [*spec.command(), "--resume"], stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=die_with(os.getpid())
         )
         RUNNING.add(child)
         code = child.wait()
@@ -264,6 +274,7 @@ def run_submitit(todo: list[RunSpec], progress: Progress, args: Args) -> None:
         executor.update_parameters(timeout_min=args.slurm_time_min)
         progress.workers = len(todo)
     jobs = executor.map_array(TrainingTask(), todo)
+    SUBMITTED.extend(jobs)
     pending = dict(zip(jobs, todo))
     while pending:
         progress.running = len(pending)
@@ -282,6 +293,8 @@ def run_submitit(todo: list[RunSpec], progress: Progress, args: Args) -> None:
 def reproduce(args: Args) -> int:
     """Returns the number of failed runs."""
     specs = grid(args)
+    results = Path(args.results or f"results/{args.preset}")
+    plot_results.check_writable(results)  # before hours of training, not after
     todo = [s for s in specs if not s.final_checkpoint.exists()]
     progress = Progress(len(specs), len(specs) - len(todo))
     print(f"{len(specs)} runs in the grid, {len(specs) - len(todo)} already trained", file=sys.stderr)
@@ -293,7 +306,6 @@ def reproduce(args: Args) -> int:
 
     preset = PRESETS[args.preset]
     root = Path(specs[0].root)
-    results = Path(args.results or f"results/{args.preset}")
     trained = sorted({str(root / s.name) for s in specs if s.final_checkpoint.parent.exists()})
     if not trained:
         raise eval_gamma_sweep.InputError("no run has any checkpoint to sweep")
@@ -324,9 +336,15 @@ def main() -> None:
     args = tyro.cli(Args)
 
     def stop(signum, _frame):
-        # End the training children with us, so that none writes into a run directory after we are gone.
+        # End the training children with us, so that none writes into a run directory after we are gone
+        # (a SIGKILLed launcher's local children die by their death signal; submitit jobs cannot).
         for child in list(RUNNING):
             child.kill()
+        for job in SUBMITTED:
+            try:
+                job.cancel(check=False)
+            except Exception:  # a job that already ended, or a scheduler that is gone
+                pass
         os._exit(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)
@@ -336,6 +354,9 @@ def main() -> None:
     except (eval_gamma_sweep.InputError, plot_results.InputError) as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
+    except OSError as e:  # e.g. a full disk while writing results; finished runs and cells stay
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(1)
     sys.exit(1 if failed else 0)
 
 

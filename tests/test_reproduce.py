@@ -63,7 +63,7 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
     """Fault injection: SIGKILL to the launcher alone while a run is between checkpoints. Its training
     child dies with it; the rerun resumes that run from its last checkpoint (bit for bit) and skips the
     finished ones, and the final CSVs equal those of a grid that was never interrupted."""
-    grid = ["--total-timesteps", "8192", "--checkpoint-interval", "2048", "--seeds", "1", "--variants", "ppo",
+    grid = ["--total-timesteps", "16384", "--checkpoint-interval", "2048", "--seeds", "1", "--variants", "ppo",
             "pgg_g1.1", "--gammas", "1", "2", "--episodes", "3", "--workers", "1"]  # fmt: skip
 
     def command(name: str) -> list[str]:
@@ -81,7 +81,7 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
         time.sleep(0.02)
     launcher.kill()
     launcher.wait()
-    assert not (root / "CartPole-v1__pgg_g1.1__s1" / "checkpoints" / "step_000008192.pt").exists(), "killed too late"
+    assert not (root / "CartPole-v1__pgg_g1.1__s1" / "checkpoints" / "step_000016384.pt").exists(), "killed too late"
     deadline = time.time() + 10
     while processes_mentioning(str(root)) and time.time() < deadline:
         time.sleep(0.1)
