@@ -116,7 +116,7 @@ class Args:
     video: str | None = None
     """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder: gamma_<γ>.mp4 and side_by_side.mp4, all from the same episode seed (needs the [video] extra); None: sweep"""
     video_episode: int = 0
-    """with --video: the episode to record, k (reset seed eval_seed + k, as episode k of a sweep cell)"""
+    """with --video: the episode to record, k (reset seed eval_seed + k and the action noise of a sweep cell's episode k)"""
 
 
 class InputError(Exception):
@@ -235,12 +235,8 @@ class GuidedPolicy:
         self.agent, self.kind = agent, ckpt["action_space"]
         mlp = agent.actor if self.kind == "discrete" else agent.actor_mean
         self.in_features = next(m.in_features for m in mlp if isinstance(m, torch.nn.Linear))
-        # (weight, bias) of a Linear layer, None for a Tanh, else the module itself
-        self.layers = [
-            (m.weight.detach(), m.bias.detach()) if isinstance(m, torch.nn.Linear)
-            else None if isinstance(m, torch.nn.Tanh) else m
-            for m in mlp
-        ]  # fmt: skip
+        # (weight, bias) of each Linear layer, None for each Tanh: the agents' MLPs have nothing else
+        self.layers = [(m.weight.detach(), m.bias.detach()) if isinstance(m, torch.nn.Linear) else None for m in mlp]
         with torch.no_grad():
             if self.kind == "discrete":
                 learned = agent.unconditional_logits()
@@ -273,13 +269,7 @@ class GuidedPolicy:
         view[:rows] = raw_obs if self.kind == "discrete" else self.agent.obs_norm(raw_obs).numpy()
         view[rows:] = view[0]
         for layer in self.layers:
-            if layer is None:
-                x = torch.tanh(x)
-            elif isinstance(layer, tuple):
-                x = torch.nn.functional.linear(x, *layer)
-            else:
-                with torch.no_grad():
-                    x = layer(x)
+            x = torch.tanh(x) if layer is None else torch.nn.functional.linear(x, *layer)
         return x.numpy()[:rows]
 
     @staticmethod
@@ -581,8 +571,8 @@ def check_args(args: Args) -> None:
         raise InputError("--steps needs at least one value (leave it out for every checkpoint)")
     if args.episodes <= 0 or args.workers <= 0 or args.bootstrap_samples <= 0:
         raise InputError("--episodes, --workers and --bootstrap-samples must be positive")
-    if args.eval_seed < 0:
-        raise InputError(f"--eval-seed must be >= 0, got {args.eval_seed}")
+    if args.eval_seed < 0 or args.video_episode < 0:
+        raise InputError(f"--eval-seed and --video-episode must be >= 0, got {args.eval_seed} and {args.video_episode}")
     if not args.output:
         raise InputError("--output must name a directory")
 
@@ -822,7 +812,10 @@ def record_videos(args: Args) -> list[Path]:
         agent, ckpt = load_any_checkpoint(checkpoints[0])
     except ValueError as e:
         raise InputError(f"{checkpoints[0]}: {e}") from None
-    probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
+    try:
+        probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
+    except Exception as e:  # a missing dependency (Pusher-v4 on mujoco 3), a bad MUJOCO_GL, ...
+        raise InputError(f"cannot make environment {ckpt['env_id']!r}: {e}") from None
     error = TRAINING_MODULES[ckpt["action_space"]].video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30
     probe.close()

@@ -55,6 +55,9 @@ import numpy as np  # noqa: E402
 import tyro  # noqa: E402
 from scipy import stats  # noqa: E402
 
+import ppo_pgg_continuous  # noqa: E402
+import ppo_pgg_discrete  # noqa: E402
+
 
 
 def mean_ci95(values):
@@ -98,10 +101,9 @@ CLEANRL_PPO = {"CartPole-v1": (490.04, 6.12), "Acrobot-v1": (-86.36, 1.32), "Hop
 CLEANRL_SEEDS = 3
 CLEANRL_STEPS = {"discrete": 500_000, "continuous": 1_000_000}
 ALPHA = 0.05
-# Run arguments that do not change what is trained (or only its bits): never part of a configuration.
-NOT_CONFIG_ARGS = {"seed", "run_name", "exp_name", "output_dir", "torch_threads", "cuda", "track", "wandb_project_name",
-                   "wandb_entity", "capture_video", "checkpoint_interval", "compile", "resume", "overwrite",
-                   "torch_deterministic", "progress"}  # fmt: skip
+# Run arguments that do not change what is trained (or only its bits), and the seed: never part of a
+# configuration. The training scripts name the former.
+NOT_CONFIG_ARGS = ppo_pgg_discrete.RUN_ONLY_ARGS | ppo_pgg_continuous.RUN_ONLY_ARGS | {"seed"}
 MARKERS = "osD^vPX*hp<>"
 
 
@@ -225,12 +227,12 @@ def check_not_pooled(rows: list[dict]) -> None:
             raise InputError(f"two runs of configuration '{row['config']}' on {row['env_id']} with seed {row['seed']}: "
                              f"{run_a} ({source_a}) and {run_b} ({source_b}); give them different configs or sweep "
                              "them apart")  # fmt: skip
-        key = (row["env_id"], row["config"], run, row["step"], row["eval_guidance"], row["policy"], row["null_branch"],
-               row.get("episode", ""))  # fmt: skip
+        key = (row["env_id"], row["config"], row["seed"], run, row["step"], row["eval_guidance"], row["policy"],
+               row["null_branch"], row.get("episode", ""))  # fmt: skip
         if key in episodes:
             first = episodes[key]
             where = f"both {first} and {source}" if first != source else f"{source} twice"
-            raise InputError(f"episode {key[7]} of run {run} at step {row['step']}, γ {row['eval_guidance']} appears in "
+            raise InputError(f"episode {key[8]} of run {run} at step {row['step']}, γ {row['eval_guidance']} appears in "
                              f"{where}; pass each sweep once")  # fmt: skip
         episodes[key] = source
 
@@ -787,7 +789,7 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
     points exist and says so in the panel when they are too few for a curve."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    runs = []
+    runs, run_dirs = [], []
     for args_file in run_args_files(run_paths):
         run_args = json.loads(args_file.read_text())
         accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
@@ -797,14 +799,20 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
         events = accumulator.Scalars("charts/episodic_return")
         variant = variant_label(run_args["guidance"], run_args["cond_dropout"])
         runs.append((run_args, variant, np.array([e.step for e in events]), np.array([e.value for e in events])))
+        run_dirs.append(args_file.parent)
     if not runs:
         raise InputError(f"no TensorBoard episodic returns under {', '.join(run_paths)}")
     siblings = defaultdict(list)
     for run_args, variant, _, _ in runs:
         siblings[(run_args["env_id"], variant)].append(run_args)
     curves = defaultdict(list)  # (env, variant, config label) -> [(steps, returns)] per seed
-    for run_args, variant, steps, returns in runs:
+    seen = {}  # (env, variant, config label, seed) -> run directory: one seed is one run
+    for (run_args, variant, steps, returns), run_dir in zip(runs, run_dirs):
         label = run_config(run_args, siblings[(run_args["env_id"], variant)])
+        first = seen.setdefault((run_args["env_id"], variant, label, run_args["seed"]), run_dir)
+        if first != run_dir:
+            raise InputError(f"two runs of one configuration and seed {run_args['seed']}: {first} and {run_dir} "
+                             "(e.g. runs of two roots or MuJoCo versions); plot them apart")  # fmt: skip
         curves[(run_args["env_id"], variant, label)].append((steps, returns))
     envs = sorted({env for env, _, _ in curves})
     fig, axes = panels(len(envs))

@@ -440,3 +440,18 @@ def test_invalid_choices_are_rejected_up_front(sweep_dir, tmp_path):
         plots.validate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), policy="greedy"))
     with pytest.raises(plots.InputError, match="--provenance: no such file"):
         plots.validate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), provenance=str(tmp_path / "x.csv")))
+
+
+def test_learning_curves_never_count_one_seed_twice(tmp_path):
+    """The same run name under two roots (two machines, two MuJoCo versions) is two runs of one
+    configuration and seed: an error naming both, not one curve with twice the seeds."""
+    import shutil
+
+    import ppo_pgg_discrete
+
+    args = ppo_pgg_discrete.Args(total_timesteps=512, checkpoint_interval=512, output_dir=str(tmp_path / "a"))
+    run_dir = ppo_pgg_discrete.prepare_run_dir(args)
+    ppo_pgg_discrete.train(args, run_dir)
+    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    with pytest.raises(plots.InputError, match="two runs of one configuration and seed 1"):
+        plots.learning_curves([str(tmp_path / "a"), str(tmp_path / "b")], tmp_path / "out", [])
