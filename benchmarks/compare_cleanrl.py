@@ -1,4 +1,4 @@
-"""Our PPO (`--guidance 1 --cond-dropout 0`, which trains exactly PPO) against CleanRL's own `ppo.py` or
+"""Our PPO (`--guidance 1 --cond-dropout 0`: CleanRL's algorithm and defaults) against CleanRL's own `ppo.py` or
 `ppo_continuous_action.py`, each run in its own environment, over several seeds.
 
     python benchmarks/compare_cleanrl.py --env-id CartPole-v1 --seeds 8 --total-timesteps 500000 \\
@@ -433,6 +433,11 @@ def compute(env_id: str, folder: Path) -> Analysis:
     missing = [impl for impl in IMPLS if not saved[impl]]
     if missing:
         raise CompareError(f"no saved {' or '.join(missing)} runs in {folder}")
+    # Like with like: only the seeds that both implementations have finished (a comparison still running).
+    both = set.intersection(*({run.seed for run in runs} for runs in saved.values()))
+    if not both:
+        raise CompareError(f"no seed in {folder} has finished runs of both implementations yet")
+    saved = {impl: [run for run in runs if run.seed in both] for impl, runs in saved.items()}
     trained = {impl: min(run.meta["steps_trained"] for run in runs) for impl, runs in saved.items()}
     end = min(trained.values())
     scores = {impl: np.array([run_scores(run.episodes, end) for run in runs]) for impl, runs in saved.items()}
