@@ -632,11 +632,11 @@ def init_worker(parent_pid: int) -> None:
         os._exit(1)
 
 
-def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) -> dict:
-    """{(checkpoint, γ): cell path} of every cell the sweep asks for. Reads each checkpoint once;
-    unreadable ones go to `skipped`. InputError if two checkpoints are the same experiment, seed and
-    step (two runs that would count as one seed)."""
-    settings, cells, experiments = settings_of(args), {}, {}
+def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) -> tuple[dict, dict]:
+    """({(checkpoint, γ): cell path} of every cell the sweep asks for, {checkpoint: config label}).
+    Reads each checkpoint once; unreadable ones go to `skipped`. InputError if two checkpoints are the
+    same experiment, seed and step (two runs that would count as one seed)."""
+    settings, cells, experiments, labels = settings_of(args), {}, {}, {}
     for checkpoint in checkpoints:
         try:
             digest, ckpt = read_checkpoint(checkpoint)
@@ -656,9 +656,10 @@ def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) 
                 f"{other} and {checkpoint} are two runs of one experiment ({identity[0]}, {identity[1]!r}, seed "
                 f"{identity[4]}, step {identity[5]}) and would count as one seed; sweep them separately or remove one"
             )
+        labels[checkpoint] = identity[1]
         for gamma in dict.fromkeys(args.gammas if args.gammas is not None else PAPER_GAMMAS[kind]):
             cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest)
-    return cells
+    return cells, labels
 
 
 def sweep(args: Args) -> Path:
@@ -677,7 +678,7 @@ def sweep(args: Args) -> Path:
 
 def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
     skipped = []
-    cells = plan(args, checkpoints, output, skipped)
+    cells, labels = plan(args, checkpoints, output, skipped)
     try:
         done = sum(path.exists() for path in cells.values())
         print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {done} already done", file=sys.stderr)
@@ -687,7 +688,9 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
         rows = []
         for (checkpoint, _), path in cells.items():
             if path.exists() and checkpoint not in changed:
-                rows.extend(read_csv(path))
+                # The label of today's defaults: a cell written before a default changed keeps its numbers
+                # but must not split its run from the cells written after.
+                rows.extend({**row, "config": labels[checkpoint]} for row in read_csv(path))
         rows.sort(key=episode_sort_key)
         summary = summarise(rows, args.ci, args.bootstrap_samples)
         write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)

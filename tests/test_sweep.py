@@ -629,3 +629,16 @@ def test_video_of_a_mujoco_checkpoint_where_a_gl_backend_renders(runs, tmp_path)
                           capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert frame_count(tmp_path / "v" / "side_by_side.mp4") >= max(frame_count(tmp_path / "v" / f"gamma_{g}.mp4") for g in ("1", "1.5"))
+
+
+def test_cached_cells_take_todays_config_label(runs, tmp_path):
+    """A cell keeps its numbers across reruns, but its rows carry the label the checkpoint has today:
+    a cell written under older defaults must not split its run into two configurations."""
+    args = sweep_args(runs, tmp_path / "out")
+    sweep.sweep(args)
+    fresh = sweep.read_csv(tmp_path / "out" / "episodes.csv")
+    for cell in (tmp_path / "out" / "cells").glob("*.csv"):
+        rows = sweep.read_csv(cell)
+        sweep.write_csv_atomic(cell, sweep.EPISODE_COLUMNS, [{**row, "config": "pgg_g1.1 stale=1"} for row in rows])
+    sweep.sweep(args)
+    assert sweep.read_csv(tmp_path / "out" / "episodes.csv") == fresh
