@@ -380,20 +380,27 @@ def evaluate_sequential(policy: GuidedPolicy, ckpt, gamma, episodes, eval_seed, 
     Same seeds and noise as evaluate_cell; used by the tests and the benchmark. It agrees with the
     cells to rounding, not necessarily to the bit (see the module docstring)."""
     env = make_eval_env(ckpt)
-    horizon, action_size = horizon_and_action_size(env, ckpt)
-    returns, lengths = [], []
-    for k in range(episodes):
-        noise = episode_noise(policy.kind, eval_seed, k, horizon, action_size)
-        obs, _ = env.reset(seed=eval_seed + k)
-        total, t, done = 0.0, 0, False
-        while not done:
-            action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], deterministic)[0]
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total, t, done = total + reward, t + 1, terminated or truncated
-        returns.append(total)
-        lengths.append(t)
+    returns, lengths = zip(*(play_episode(env, policy, ckpt, gamma, eval_seed, k, deterministic) for k in range(episodes)))
     env.close()
     return np.array(returns), np.array(lengths)
+
+
+def play_episode(env, policy: GuidedPolicy, ckpt, gamma: float, eval_seed: int, episode: int, deterministic: bool,
+                 after_step=None) -> tuple[float, int]:  # fmt: skip
+    """Episode `episode` of a cell, one observation per forward; returns (return, length).
+    `after_step()` is called after the reset and after every step (to render a frame)."""
+    horizon, action_size = horizon_and_action_size(env, ckpt)
+    noise = episode_noise(policy.kind, eval_seed, episode, horizon, action_size)
+    obs, _ = env.reset(seed=eval_seed + episode)
+    total, t, done = 0.0, 0, False
+    while True:
+        if after_step is not None:
+            after_step()
+        if done:
+            return total, t
+        action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], deterministic)[0]
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total, t, done = total + float(reward), t + 1, terminated or truncated
 
 
 # --- cells, resumption, output ---------------------------------------------------------------------
@@ -752,20 +759,13 @@ def evaluate_missing(args: Args, output: Path, cells: dict, skipped: list[str]) 
 
 
 def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, eval_seed: int, episode: int, deterministic: bool):
-    """Episode `episode` of a sweep cell at `gamma`, played one observation at a time (as
-    evaluate_sequential) with its frames; returns (frames, return)."""
+    """Episode `episode` of a sweep cell at `gamma`, played as evaluate_sequential plays it, with its
+    frames; returns (frames, return)."""
     env = gym.make(ckpt["env_id"], render_mode="rgb_array")
     if ckpt["action_space"] == "continuous":
         env = gym.wrappers.FlattenObservation(env)  # as the training script's make_env
-    horizon, action_size = horizon_and_action_size(env, ckpt)
-    noise = episode_noise(policy.kind, eval_seed, episode, horizon, action_size)
-    obs, _ = env.reset(seed=eval_seed + episode)
-    frames, total, t, done = [env.render()], 0.0, 0, False
-    while not done:
-        action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], deterministic)[0]
-        obs, reward, terminated, truncated, _ = env.step(action)
-        frames.append(env.render())
-        total, t, done = total + float(reward), t + 1, terminated or truncated
+    frames = []
+    total, _ = play_episode(env, policy, ckpt, gamma, eval_seed, episode, deterministic, lambda: frames.append(env.render()))
     env.close()
     return frames, total
 
