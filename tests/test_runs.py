@@ -233,7 +233,10 @@ def test_a_run_directory_in_use_is_refused(tmp_path):
 def test_ctrl_c_exits_130_with_one_line_saying_what_is_kept(tmp_path):
     script = ROOT / "ppo_pgg_discrete.py"
     flags = ["--output-dir", str(tmp_path), "--run-name", "stopped", "--checkpoint-interval", "2048"]
-    proc = subprocess.Popen([sys.executable, str(script), *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # A shell without job control starts background jobs with SIGINT ignored, and Python then never
+    # raises KeyboardInterrupt: this test (run from such a job) would wait in vain. Ctrl-C's default.
+    proc = subprocess.Popen([sys.executable, str(script), *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # fmt: skip
     first = tmp_path / "stopped" / "checkpoints" / "step_000002048.pt"
     deadline = time.time() + 120
     while not first.exists() and time.time() < deadline:
