@@ -925,16 +925,15 @@ def train(args: Args, run_dir: Path) -> None:
     `prepare_run_dir`). With --resume it continues from the last checkpoint bit for bit: the checkpoint
     holds the optimizer, the sub-envs mid-episode, the next observation and every RNG state."""
     try:
-        latest = latest_checkpoint(run_dir) if args.resume else None
-        resumed = torch.load(latest, map_location="cpu", weights_only=True) if latest else None
-        _train(args, run_dir, resumed)
+        _train(args, run_dir, latest_checkpoint(run_dir) if args.resume else None)
     finally:
         lock = HELD_LOCKS.pop(run_dir.resolve(), None)
         if lock is not None:
             lock.close()
 
 
-def _train(args: Args, run_dir: Path, resumed: dict | None) -> None:
+def _train(args: Args, run_dir: Path, resume_from: Path | None) -> None:
+    resumed = torch.load(resume_from, map_location="cpu", weights_only=True) if resume_from else None
     if args.track:
         import wandb
 
@@ -1004,7 +1003,7 @@ def _train(args: Args, run_dir: Path, resumed: dict | None) -> None:
             next_obs = RolloutPolicy(agent, args.guidance).observe(raw_obs)
         set_rng_state(state["rng"])
         first_iteration, global_step = state["iteration"] + 1, resumed["global_step"]
-        print(f"resuming from {latest_checkpoint(run_dir)} at global_step={global_step}", flush=True)
+        print(f"resuming from {resume_from} at global_step={global_step}", flush=True)
     marks = deque(m for m in checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size) if m > global_step)
     progress = ProgressReport(num_iterations * batch_size, global_step)
 
