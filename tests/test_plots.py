@@ -455,3 +455,32 @@ def test_learning_curves_never_count_one_seed_twice(tmp_path):
     shutil.copytree(tmp_path / "a", tmp_path / "b")
     with pytest.raises(plots.InputError, match="two runs of one configuration and seed 1"):
         plots.learning_curves([str(tmp_path / "a"), str(tmp_path / "b")], tmp_path / "out", [])
+
+
+PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"
+
+
+@pytest.mark.skipif(not PAPER_DROPOUT_FIGURE.is_file(), reason="the paper's figures are in ../shared/paper, not in the repository")
+def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
+    # The figure's PPO markers are the paper's PPO table at 200k and 1M: the pixel-to-return calibration
+    # must give those numbers back, to within 1% of each panel's y range.
+    sys.path.insert(0, str(ROOT / "data"))
+    import read_dropout_figure as reader
+
+    out = tmp_path / "readings.csv"
+    reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, csv=out))
+    with open(ROOT / "data" / "paper_results.csv") as f:
+        table = {(p["env_id"], int(p["step"])): float(p["mean"]) for p in csv.DictReader(f) if p["method"] == "ppo"}
+    with open(out) as f:
+        readings = list(csv.DictReader(f))
+    checked = 0
+    for row in readings:
+        if row["line"] != "ppo" or not row["paper_figure_mean"]:
+            continue  # a PPO marker under a dropout marker of the same value is not read
+        _, (top, bottom), ((y1, v1), (y2, v2)) = reader.PANELS[row["env_id"]]
+        y_range = abs(v2 - v1) / abs(y2 - y1) * (bottom - top)
+        assert float(row["paper_figure_mean"]) == pytest.approx(table[(row["env_id"], int(row["step"]))], abs=0.01 * y_range)
+        checked += 1
+    assert checked >= 8
+    with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
+        assert list(csv.DictReader(f)) == readings  # the committed readings are this script's

@@ -1,0 +1,135 @@
+"""Read the paper's continuous dropout figure, which has no table, into numbers; and set it beside ours.
+
+The paper gives its continuous dropout-0.1 ablation (six MuJoCo tasks, eval γ 1.0-1.2) as a figure
+only (`../shared/paper/fig_continuous_dropout0.1.png`). Its lines carry markers at 200k and 1M steps;
+this finds each marker by its colour (the legend's viridis colours, anti-aliasing tolerated) and maps
+its pixel row to a return through the panel's y ticks, whose pixel rows were measured on this figure.
+A marker hidden under another of a near value is left blank: a guess would be a number nobody read.
+The figure's black PPO markers read back the paper's PPO table to within 1% of a panel's y range
+(tests/test_plots.py). The paler γ markers, blended with the CI bands, cannot be checked that way:
+the paper gives no numbers for them.
+
+    python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
+        --csv data/paper_dropout_figure.csv
+    python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
+        --beside results/continuous/fig_continuous_pgg_drop0.1.png \
+        --output results/continuous/side_by_side_pgg_drop0.1.png
+"""
+
+import csv
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tyro
+from PIL import Image
+
+FIGURE_SIZE = (2586, 1319)  # the calibration below holds for this rendering of the figure only
+# (line, eval γ) -> marker colour: the dropout model's lines in the legend's viridis, and the paper's PPO
+# line in black, which its table also gives and so checks the calibration (tests/test_plots.py)
+LINE_COLOURS = {
+    ("ppo", 1.0): (0, 0, 0),
+    ("pgg_drop0.1", 1.0): (71, 42, 122),
+    ("pgg_drop0.1", 1.05): (51, 98, 141),
+    ("pgg_drop0.1", 1.1): (33, 145, 140),
+    ("pgg_drop0.1", 1.15): (63, 188, 115),
+    ("pgg_drop0.1", 1.2): (176, 221, 47),
+}
+COLOUR_TOLERANCE = 30  # summed |ΔRGB|; the light markers are blended with the CI bands behind them
+MIN_MARKER_PIXELS = 12  # fewer matching pixels is a line passing by, not a marker
+# env: (x of its 250k tick, its plotting area's pixel rows inside the axes' frame, two y ticks as
+# (pixel row, return)); x ticks are 175.67 px per 250k steps
+TOP_ROW, BOTTOM_ROW = (66, 568), (671, 1172)
+PANELS = {
+    "HalfCheetah-v4": (207, TOP_ROW, ((126, 2000.0), (521, 800.0))),
+    "Hopper-v4": (949, TOP_ROW, ((102, 3000.0), (503, 1200.0))),
+    "Humanoid-v4": (1690, TOP_ROW, ((114, 700.0), (420, 500.0))),
+    "InvertedPendulum-v4": (207, BOTTOM_ROW, ((720, 1000.0), (1159, 700.0))),
+    "Pusher-v4": (949, BOTTOM_ROW, ((734, -40.0), (1146, -100.0))),
+    "Walker2d-v4": (1690, BOTTOM_ROW, ((763, 3000.0), (1052, 1000.0))),
+}
+PIXELS_PER_250K = 175.67
+MARKED_STEPS = (200_000, 1_000_000)
+
+
+@dataclass
+class Args:
+    figure: tyro.conf.Positional[Path]
+    """the paper's fig_continuous_dropout0.1.png"""
+    csv: Path | None = None
+    """write the readings here (env_id, step, line, eval_guidance, paper_figure_mean)"""
+    beside: Path | None = None
+    """our figure, to be set under the paper's in one image (needs --output)"""
+    output: Path | None = None
+    """where the side-by-side image goes"""
+
+
+def read_markers(pixels: np.ndarray) -> list[dict]:
+    """One row per (env, marked step, line, eval γ): the return at the marker's median pixel row, or None."""
+    rows = []
+    for env, (x_250k, (top, bottom), ((y1, v1), (y2, v2))) in PANELS.items():
+        for step in MARKED_STEPS:
+            x = round(x_250k + (step - 250_000) / 250_000 * PIXELS_PER_250K)
+            window = pixels[top:bottom, x - 5 : x + 6]
+            for (line, gamma), colour in LINE_COLOURS.items():
+                hits = np.nonzero(np.abs(window - np.array(colour)).sum(axis=2) <= COLOUR_TOLERANCE)[0]
+                value = None
+                if len(hits) >= MIN_MARKER_PIXELS:
+                    y = top + float(np.median(hits))
+                    value = round(v1 + (y - y1) * (v2 - v1) / (y2 - y1), 1)
+                rows.append({"env_id": env, "step": step, "line": line, "eval_guidance": gamma, "paper_figure_mean": value})
+    return rows
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    with open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({k: "" if v is None else v for k, v in row.items()} for row in rows)
+    os.replace(tmp, path)
+
+
+def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
+    """The paper's figure above ours, both scaled to one width, with a caption strip over each."""
+    from PIL import ImageDraw
+
+    width = max(paper.width, ours.width)
+    scaled = [im.resize((width, round(im.height * width / im.width))) for im in (paper, ours)]
+    captions = ("The paper's figure (Qi, Tang, Zhu): continuous PPO with dropout 10%",
+                "This reproduction: 5 seeds, 50 episodes per cell (eval γ up to 1.5; the paper drew 1.0-1.2)")  # fmt: skip
+    strip = 60
+    canvas = Image.new("RGB", (width, sum(im.height + strip for im in scaled)), "white")
+    draw, y = ImageDraw.Draw(canvas), 0
+    for im, caption in zip(scaled, captions):
+        draw.text((20, y + 15), caption, fill="black", font_size=32)
+        canvas.paste(im.convert("RGB"), (0, y + strip))
+        y += im.height + strip
+    tmp = path.with_name(path.name + ".tmp.png")
+    canvas.save(tmp)
+    os.replace(tmp, path)
+
+
+def main(args: Args) -> None:
+    if not args.figure.is_file():
+        sys.exit(f"error: no figure at {args.figure}")
+    paper = Image.open(args.figure)
+    if paper.size != FIGURE_SIZE:
+        sys.exit(f"error: {args.figure} is {paper.size[0]}x{paper.size[1]}; the calibration is for the paper's {FIGURE_SIZE[0]}x{FIGURE_SIZE[1]} rendering")
+    if (args.beside is None) != (args.output is None):
+        sys.exit("error: --beside and --output go together")
+    if args.csv is not None:
+        rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
+        write_csv(rows, args.csv)
+        print(f"wrote {args.csv} ({sum(r['paper_figure_mean'] is not None for r in rows)} of {len(rows)} markers read)")
+    if args.beside is not None:
+        if not args.beside.is_file():
+            sys.exit(f"error: no figure at {args.beside}")
+        side_by_side(paper, Image.open(args.beside), args.output)
+        print(f"wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main(tyro.cli(Args))
