@@ -13,7 +13,8 @@ the paper gives no numbers for them.
         --csv data/paper_dropout_figure.csv
     python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
         --beside results/continuous/fig_continuous_pgg_drop0.1.png \
-        --output results/continuous/side_by_side_pgg_drop0.1.png
+        --output results/continuous/side_by_side_pgg_drop0.1.png \
+        --ours results/continuous_dropout/summary.csv --table results/continuous_dropout/compare_paper_figure.md
 """
 
 import csv
@@ -64,6 +65,10 @@ class Args:
     """our figure, to be set under the paper's in one image (needs --output)"""
     output: Path | None = None
     """where the side-by-side image goes"""
+    ours: Path | None = None
+    """our sweep's summary.csv, to be tabled beside the readings (needs --table)"""
+    table: Path | None = None
+    """where the Markdown table of readings against our cells goes"""
 
 
 def read_markers(pixels: np.ndarray) -> list[dict]:
@@ -83,13 +88,51 @@ def read_markers(pixels: np.ndarray) -> list[dict]:
     return rows
 
 
-def write_csv(rows: list[dict], path: Path) -> None:
+def write_text(path: Path, write) -> None:
     tmp = path.with_name(path.name + ".tmp")
     with open(tmp, "w", newline="") as f:
+        write(f)
+    os.replace(tmp, path)
+
+
+def write_csv(rows: list[dict], path: Path) -> None:
+    def write(f):
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows({k: "" if v is None else v for k, v in row.items()} for row in rows)
-    os.replace(tmp, path)
+
+    write_text(path, write)
+
+
+def our_cells(summary: Path) -> dict:
+    """(env, step, eval γ) -> (mean, ci95) of the dropout-0.1 models, sampled actions, learned null."""
+    cells = {}
+    with open(summary) as f:
+        for row in csv.DictReader(f):
+            if (row["variant"], row["policy"], row["null_branch"]) != ("pgg_drop0.1", "sample", "learned"):
+                continue
+            key = (row["env_id"], int(row["step"]), float(row["eval_guidance"]))
+            if key in cells:
+                sys.exit(f"error: {summary} has two configurations for {key}; give a summary of one")
+            cells[key] = (float(row["mean"]), float(row["ci95"]))
+    return cells
+
+
+def comparison_table(readings: list[dict], cells: dict) -> str:
+    """Each read marker beside our cell: our mean ± 95% CI, and whether the paper's value lies inside."""
+    lines = ["| task | step | eval γ | paper (read off its figure) | ours (mean ± 95% CI, 5 seeds) | paper inside our CI |",
+             "|---|---|---|---|---|---|"]  # fmt: skip
+    for r in readings:
+        if r["line"] != "pgg_drop0.1":
+            continue
+        ours = cells.get((r["env_id"], r["step"], r["eval_guidance"]))
+        paper = r["paper_figure_mean"]
+        paper_text = "hidden under another marker" if paper is None else f"{paper:.1f}"
+        ours_text = "not run" if ours is None else f"{ours[0]:.1f} ± {ours[1]:.1f}"
+        inside = "" if paper is None or ours is None else ("yes" if abs(paper - ours[0]) <= ours[1] else "**no**")
+        step = "1M" if r["step"] == 1_000_000 else f"{r['step'] // 1000}k"
+        lines.append(f"| {r['env_id']} | {step} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
+    return "\n".join(lines) + "\n"
 
 
 def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
@@ -120,15 +163,22 @@ def main(args: Args) -> None:
         sys.exit(f"error: {args.figure} is {paper.size[0]}x{paper.size[1]}; the calibration is for the paper's {FIGURE_SIZE[0]}x{FIGURE_SIZE[1]} rendering")
     if (args.beside is None) != (args.output is None):
         sys.exit("error: --beside and --output go together")
+    if (args.ours is None) != (args.table is None):
+        sys.exit("error: --ours and --table go together")
+    for given in (args.beside, args.ours):
+        if given is not None and not given.is_file():
+            sys.exit(f"error: no file at {given}")
+    rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
     if args.csv is not None:
-        rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
         write_csv(rows, args.csv)
         print(f"wrote {args.csv} ({sum(r['paper_figure_mean'] is not None for r in rows)} of {len(rows)} markers read)")
     if args.beside is not None:
-        if not args.beside.is_file():
-            sys.exit(f"error: no figure at {args.beside}")
         side_by_side(paper, Image.open(args.beside), args.output)
         print(f"wrote {args.output}")
+    if args.ours is not None:
+        table = comparison_table(rows, our_cells(args.ours))
+        write_text(args.table, lambda f: f.write(table))
+        print(f"wrote {args.table}")
 
 
 if __name__ == "__main__":

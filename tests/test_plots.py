@@ -484,3 +484,9 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
     assert checked >= 8
     with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
         assert list(csv.DictReader(f)) == readings  # the committed readings are this script's
+    pendulum = reader.read_markers(np.asarray(reader.Image.open(PAPER_DROPOUT_FIGURE).convert("RGB")).astype(int))
+    cells = {("InvertedPendulum-v4", 1_000_000, 1.0): (930.0, 20.0), ("InvertedPendulum-v4", 1_000_000, 1.2): (930.0, 20.0)}
+    table = reader.comparison_table(pendulum, cells)
+    assert "| InvertedPendulum-v4 | 1M | 1 | 920.0 | 930.0 ± 20.0 | yes |" in table
+    assert "| InvertedPendulum-v4 | 1M | 1.2 | 985.6 | 930.0 ± 20.0 | **no** |" in table
+    assert "| InvertedPendulum-v4 | 1M | 1.1 | hidden under another marker | not run |  |" in table
