@@ -14,7 +14,7 @@ the paper gives no numbers for them.
     python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
         --beside results/continuous/fig_continuous_pgg_drop0.1.png \
         --output results/continuous/side_by_side_pgg_drop0.1.png \
-        --ours results/continuous_dropout/summary.csv --table results/continuous_dropout/compare_paper_figure.md
+        --ours results/continuous_dropout/episodes.csv --table results/continuous_dropout/compare_paper_figure.md
 """
 
 import csv
@@ -66,7 +66,7 @@ class Args:
     output: Path | None = None
     """where the side-by-side image goes"""
     ours: Path | None = None
-    """our sweep's summary.csv, to be tabled beside the readings (needs --table)"""
+    """our sweep's episodes.csv, summarised as plot_results does and tabled beside the readings (needs --table)"""
     table: Path | None = None
     """where the Markdown table of readings against our cells goes"""
 
@@ -104,17 +104,24 @@ def write_csv(rows: list[dict], path: Path) -> None:
     write_text(path, write)
 
 
-def our_cells(summary: Path) -> dict:
-    """(env, step, eval γ) -> (mean, ci95) of the dropout-0.1 models, sampled actions, learned null."""
+def our_cells(episodes: Path) -> dict:
+    """(env, step, eval γ) -> (mean, ci95) over seeds of the dropout-0.1 models, sampled actions,
+    learned null: plot_results' summary of the sweep."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+    import plot_results
+
+    try:
+        rows = plot_results.select_mode(plot_results.read_episodes([str(episodes)]), "sample", "learned")
+    except plot_results.InputError as e:
+        sys.exit(f"error: {e}")
     cells = {}
-    with open(summary) as f:
-        for row in csv.DictReader(f):
-            if (row["variant"], row["policy"], row["null_branch"]) != ("pgg_drop0.1", "sample", "learned"):
-                continue
-            key = (row["env_id"], int(row["step"]), float(row["eval_guidance"]))
-            if key in cells:
-                sys.exit(f"error: {summary} has two configurations for {key}; give a summary of one")
-            cells[key] = (float(row["mean"]), float(row["ci95"]))
+    for row in plot_results.summarise(rows):
+        if row["variant"] != "pgg_drop0.1":
+            continue
+        key = (row["env_id"], row["step"], row["eval_guidance"])
+        if key in cells:
+            sys.exit(f"error: {episodes} has two configurations of {key}; give it the sweep of one")
+        cells[key] = (row["mean"], row["ci95"])
     return cells
 
 

@@ -461,7 +461,7 @@ PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropou
 
 
 @pytest.mark.skipif(not PAPER_DROPOUT_FIGURE.is_file(), reason="the paper's figures are in ../shared/paper, not in the repository")
-def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
+def test_dropout_figure_reading_recovers_the_papers_ppo_table_and_sets_ours_beside_it(tmp_path):
     # The figure's PPO markers are the paper's PPO table at 200k and 1M: the pixel-to-return calibration
     # must give those numbers back, to within 1% of each panel's y range.
     sys.path.insert(0, str(ROOT / "data"))
@@ -484,9 +484,11 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
     assert checked >= 8
     with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
         assert list(csv.DictReader(f)) == readings  # the committed readings are this script's
-    pendulum = reader.read_markers(np.asarray(reader.Image.open(PAPER_DROPOUT_FIGURE).convert("RGB")).astype(int))
-    cells = {("InvertedPendulum-v4", 1_000_000, 1.0): (930.0, 20.0), ("InvertedPendulum-v4", 1_000_000, 1.2): (930.0, 20.0)}
-    table = reader.comparison_table(pendulum, cells)
-    assert "| InvertedPendulum-v4 | 1M | 1 | 920.0 | 930.0 ± 20.0 | yes |" in table
-    assert "| InvertedPendulum-v4 | 1M | 1.2 | 985.6 | 930.0 ± 20.0 | **no** |" in table
+    # our cells: seed means 920, 930, 940 -> 930.0 ± 24.8 (t(.975, 2) · 10 / √3); the paper read 920.0 and 985.6
+    ours = {("InvertedPendulum-v4", "pgg_drop0.1", 1_000_000, gamma): [920.0, 930.0, 940.0] for gamma in (1.0, 1.2)}
+    write_episodes(tmp_path / "episodes.csv", episode_rows(ours))
+    reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, ours=tmp_path / "episodes.csv", table=tmp_path / "table.md"))
+    table = (tmp_path / "table.md").read_text()
+    assert "| InvertedPendulum-v4 | 1M | 1 | 920.0 | 930.0 ± 24.8 | yes |" in table
+    assert "| InvertedPendulum-v4 | 1M | 1.2 | 985.6 | 930.0 ± 24.8 | **no** |" in table
     assert "| InvertedPendulum-v4 | 1M | 1.1 | hidden under another marker | not run |  |" in table
