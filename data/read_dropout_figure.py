@@ -14,7 +14,10 @@ the paper gives no numbers for them.
     python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
         --beside results/continuous/fig_continuous_pgg_drop0.1.png \
         --output results/continuous/side_by_side_pgg_drop0.1.png \
-        --ours results/continuous_dropout/episodes.csv --table results/continuous_dropout/compare_paper_figure.md
+        --ours results/continuous_dropout/episodes.csv results/continuous/episodes.csv \
+               results/continuous_device/episodes.csv results/continuous_pusher/episodes.csv \
+               results/continuous_humanoid/episodes.csv \
+        --provenance results/provenance.csv --table results/continuous_dropout/compare_paper_figure.md
 """
 
 import csv
@@ -52,6 +55,7 @@ PANELS = {
     "Walker2d-v4": (1690, BOTTOM_ROW, ((763, 3000.0), (1052, 1000.0))),
 }
 PIXELS_PER_250K = 175.67
+PAPER_TABLES = Path(__file__).resolve().parent / "paper_results.csv"
 MARKED_STEPS = (200_000, 1_000_000)
 
 
@@ -65,10 +69,13 @@ class Args:
     """our figure, to be set under the paper's in one image (needs --output)"""
     output: Path | None = None
     """where the side-by-side image goes"""
-    ours: Path | None = None
-    """our sweep's episodes.csv, summarised as plot_results does and tabled beside the readings (needs --table)"""
+    ours: tuple[Path, ...] | None = None
+    """our sweeps' episodes.csv files (the dropout models', and PPO's for the effects table), summarised as
+    plot_results does and tabled beside the readings (needs --table)"""
     table: Path | None = None
-    """where the Markdown table of readings against our cells goes"""
+    """where the Markdown tables of readings against our cells go"""
+    provenance: Path | None = None
+    """results/provenance.csv, which names the MuJoCo of sweeps that predate the config column"""
 
 
 def read_markers(pixels: np.ndarray) -> list[dict]:
@@ -104,30 +111,39 @@ def write_csv(rows: list[dict], path: Path) -> None:
     write_text(path, write)
 
 
-def our_cells(episodes: Path) -> dict:
-    """(env, step, eval γ) -> (mean, ci95) over seeds of the dropout-0.1 models, sampled actions,
-    learned null: plot_results' summary of the sweep."""
+def our_summary(episodes: tuple[Path, ...], provenance: Path | None) -> list[dict]:
+    """plot_results' summary (statistics over seeds per cell) of our sweeps, sampled actions, learned null."""
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     import plot_results
 
     try:
-        rows = plot_results.select_mode(plot_results.read_episodes([str(episodes)]), "sample", "learned")
+        rows = plot_results.select_mode(plot_results.read_episodes([str(p) for p in episodes]), "sample", "learned")
     except plot_results.InputError as e:
         sys.exit(f"error: {e}")
+    return plot_results.summarise(rows, plot_results.read_provenance(str(provenance) if provenance else None))
+
+
+def dropout_cells(summary: list[dict]) -> dict:
+    """(env, step, eval γ) -> the summary row of the dropout-0.1 models; one configuration per cell."""
     cells = {}
-    for row in plot_results.summarise(rows):
+    for row in summary:
         if row["variant"] != "pgg_drop0.1":
             continue
         key = (row["env_id"], row["step"], row["eval_guidance"])
         if key in cells:
-            sys.exit(f"error: {episodes} has two configurations of {key}; give it the sweep of one")
-        cells[key] = (row["mean"], row["ci95"])
+            sys.exit(f"error: two configurations of the dropout models at {key}: {cells[key]['config']}, {row['config']}")
+        cells[key] = row
     return cells
 
 
-def comparison_table(readings: list[dict], cells: dict) -> str:
+def step_label(step: int) -> str:
+    return "1M" if step == 1_000_000 else f"{step // 1000}k"
+
+
+def comparison_table(readings: list[dict], summary: list[dict]) -> str:
     """Each read marker beside our cell: our mean ± 95% CI, and whether the paper's value lies inside."""
-    lines = ["| task | step | eval γ | paper (read off its figure) | ours (mean ± 95% CI, 5 seeds) | paper inside our CI |",
+    cells = dropout_cells(summary)
+    lines = ["| task | step | eval γ | paper (read off its figure) | ours (mean ± 95% CI over seeds) | paper inside our CI |",
              "|---|---|---|---|---|---|"]  # fmt: skip
     for r in readings:
         if r["line"] != "pgg_drop0.1":
@@ -135,10 +151,48 @@ def comparison_table(readings: list[dict], cells: dict) -> str:
         ours = cells.get((r["env_id"], r["step"], r["eval_guidance"]))
         paper = r["paper_figure_mean"]
         paper_text = "hidden under another marker" if paper is None else f"{paper:.1f}"
-        ours_text = "not run" if ours is None else f"{ours[0]:.1f} ± {ours[1]:.1f}"
-        inside = "" if paper is None or ours is None else ("yes" if abs(paper - ours[0]) <= ours[1] else "**no**")
-        step = "1M" if r["step"] == 1_000_000 else f"{r['step'] // 1000}k"
-        lines.append(f"| {r['env_id']} | {step} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
+        ours_text = "not run" if ours is None else f"{ours['mean']:.1f} ± {ours['ci95']:.1f}"
+        inside = "" if paper is None or ours is None else ("yes" if abs(paper - ours["mean"]) <= ours["ci95"] else "**no**")
+        lines.append(f"| {r['env_id']} | {step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
+    return "\n".join(lines) + "\n"
+
+
+def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, step: int = 1_000_000) -> str:
+    """The paper's two claims at `step`, per task: does dropout cost return against PPO (both at γ = 1,
+    Welch's t over seeds), and does guidance cost the dropout models return (γ = 1.2 − γ = 1, the same
+    checkpoints, paired t over seeds)."""
+    from scipy import stats
+
+    cells = dropout_cells(summary)
+    read = {(r["env_id"], r["step"], r["line"], r["eval_guidance"]): r["paper_figure_mean"] for r in readings}
+    lines = [f"At {step_label(step)} steps; ours mean ± 95% CI over seeds, p two-sided. The paper's PPO is its table's, "
+             "its dropout values are read off its figure (– where a marker is hidden).", "",
+             "| task | PPO, ours (γ = 1) | dropout, ours (γ = 1) | Welch p | paper: PPO / dropout (γ = 1) "
+             "| dropout γ = 1.2 − γ = 1, ours | paired p | paper: γ = 1.2 − γ = 1 |",
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for env in PANELS:
+        at_1, at_12 = cells.get((env, step, 1.0)), cells.get((env, step, 1.2))
+        if at_1 is None:
+            continue
+        drop_1 = [float(m) for m in at_1["seed_means"].split(";")]
+        shift, paired_p = "–", "–"
+        if at_12 is not None:
+            drop_12 = [float(m) for m in at_12["seed_means"].split(";")]
+            shift = f"{np.mean(drop_12) - np.mean(drop_1):+.1f}"
+            paired_p = f"{stats.ttest_rel(drop_12, drop_1).pvalue:.2f}"
+        paper_1, paper_12 = read.get((env, step, "pgg_drop0.1", 1.0)), read.get((env, step, "pgg_drop0.1", 1.2))
+        paper_shift = "–" if paper_1 is None or paper_12 is None else f"{paper_12 - paper_1:+.1f}"
+        paper_cols = f"{paper_ppo.get((env, step), float('nan')):.1f} / {'–' if paper_1 is None else f'{paper_1:.1f}'}"
+        ppos = [r for r in summary if (r["env_id"], r["variant"], r["step"], r["eval_guidance"]) == (env, "ppo", step, 1.0)]
+        for ppo in ppos or [None]:
+            if ppo is None:
+                ppo_text, welch_p = "not run", "–"
+            else:
+                label = f" (MuJoCo {ppo['mujoco']})" if ppo["mujoco"] != at_1["mujoco"] else ""
+                ppo_text = f"{ppo['mean']:.1f} ± {ppo['ci95']:.1f}{label}"
+                welch_p = f"{stats.ttest_ind_from_stats(at_1['mean'], at_1['sd'], at_1['n_seeds'], ppo['mean'], ppo['sd'], ppo['n_seeds'], equal_var=False).pvalue:.2f}"
+            lines.append(f"| {env} | {ppo_text} | {at_1['mean']:.1f} ± {at_1['ci95']:.1f} | {welch_p} | {paper_cols} "
+                         f"| {shift} | {paired_p} | {paper_shift} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
@@ -172,7 +226,7 @@ def main(args: Args) -> None:
         sys.exit("error: --beside and --output go together")
     if (args.ours is None) != (args.table is None):
         sys.exit("error: --ours and --table go together")
-    for given in (args.beside, args.ours):
+    for given in (args.beside, args.provenance, *(args.ours or ())):
         if given is not None and not given.is_file():
             sys.exit(f"error: no file at {given}")
     rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
@@ -183,8 +237,13 @@ def main(args: Args) -> None:
         side_by_side(paper, Image.open(args.beside), args.output)
         print(f"wrote {args.output}")
     if args.ours is not None:
-        table = comparison_table(rows, our_cells(args.ours))
-        write_text(args.table, lambda f: f.write(table))
+        summary = our_summary(args.ours, args.provenance)
+        with open(PAPER_TABLES) as f:
+            paper_ppo = {(r["env_id"], int(r["step"])): float(r["mean"]) for r in csv.DictReader(f) if r["method"] == "ppo"}
+        text = ("# The dropout ablation against the paper's figure\n\n## Does dropout, or guidance on top of it, cost return?\n\n"
+                + effects_table(rows, summary, paper_ppo) + "\n## Every read marker beside our cell\n\n"
+                + comparison_table(rows, summary))  # fmt: skip
+        write_text(args.table, lambda f: f.write(text))
         print(f"wrote {args.table}")
 
 

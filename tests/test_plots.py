@@ -485,10 +485,17 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table_and_sets_ours_besi
     with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
         assert list(csv.DictReader(f)) == readings  # the committed readings are this script's
     # our cells: seed means 920, 930, 940 -> 930.0 ± 24.8 (t(.975, 2) · 10 / √3); the paper read 920.0 and 985.6
-    ours = {("InvertedPendulum-v4", "pgg_drop0.1", 1_000_000, gamma): [920.0, 930.0, 940.0] for gamma in (1.0, 1.2)}
+    drop_1, drop_12, ppo = [920.0, 930.0, 940.0], [960.0, 950.0, 970.0], [990.0, 1000.0, 1010.0]
+    ours = {("InvertedPendulum-v4", "pgg_drop0.1", 1_000_000, 1.0): drop_1,
+            ("InvertedPendulum-v4", "pgg_drop0.1", 1_000_000, 1.2): drop_12,
+            ("InvertedPendulum-v4", "ppo", 1_000_000, 1.0): ppo}  # fmt: skip
     write_episodes(tmp_path / "episodes.csv", episode_rows(ours))
-    reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, ours=tmp_path / "episodes.csv", table=tmp_path / "table.md"))
+    reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, ours=(tmp_path / "episodes.csv",), table=tmp_path / "table.md"))
     table = (tmp_path / "table.md").read_text()
     assert "| InvertedPendulum-v4 | 1M | 1 | 920.0 | 930.0 ± 24.8 | yes |" in table
-    assert "| InvertedPendulum-v4 | 1M | 1.2 | 985.6 | 930.0 ± 24.8 | **no** |" in table
+    assert "| InvertedPendulum-v4 | 1M | 1.2 | 985.6 | 960.0 ± 24.8 | **no** |" in table
     assert "| InvertedPendulum-v4 | 1M | 1.1 | hidden under another marker | not run |  |" in table
+    welch = stats.ttest_ind(drop_1, ppo, equal_var=False).pvalue
+    paired = stats.ttest_rel(drop_12, drop_1).pvalue
+    assert (f"| InvertedPendulum-v4 | 1000.0 ± 24.8 | 930.0 ± 24.8 | {welch:.2f} | 864.7 / 920.0 | +30.0 | {paired:.2f} "
+            "| +65.6 |") in table  # fmt: skip
