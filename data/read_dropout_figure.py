@@ -1,4 +1,4 @@
-"""Read the paper's continuous dropout figure, which has no table, into numbers; and set it beside ours.
+"""Read the paper's continuous dropout figure, which has no table, into numbers; set our figure and cells beside it.
 
 The paper gives its continuous dropout-0.1 ablation (six MuJoCo tasks, eval γ 1.0-1.2) as a figure
 only (`../shared/paper/fig_continuous_dropout0.1.png`). Its lines carry markers at 200k and 1M steps;
