@@ -19,6 +19,7 @@ go to <results>.
 """
 
 import ctypes
+import fcntl
 import os
 import signal
 import subprocess
@@ -309,6 +310,9 @@ def reproduce(args: Args) -> int:
     trained = sorted({str(root / s.name) for s in specs if s.final_checkpoint.parent.exists()})
     if not trained:
         raise eval_gamma_sweep.InputError("no run has any checkpoint to sweep")
+    unfinished = [unfinished_note(s) for s in specs if s.final_checkpoint.parent.exists() and not s.final_checkpoint.exists()]
+    if unfinished:
+        print(f"note: unfinished, so swept up to the last checkpoint: {'; '.join(unfinished)}", file=sys.stderr)
     sweep_args = eval_gamma_sweep.Args(
         paths=tuple(trained), output=str(root / "sweep"), gammas=args.gammas or preset.gammas,
         episodes=args.episodes or preset.episodes, workers=args.workers,
@@ -324,6 +328,21 @@ def reproduce(args: Args) -> int:
     for spec in progress.failed:
         print(f"failed: {spec.name}, log {spec.log}", file=sys.stderr)
     return len(progress.failed)
+
+
+def unfinished_note(spec: RunSpec) -> str:
+    """`name (last checkpoint's step)`, and who is training it now where its run directory is locked."""
+    checkpoints = sorted(spec.final_checkpoint.parent.glob("step_*.pt"))
+    last = f"{int(checkpoints[-1].stem.split('_')[1]):,}" if checkpoints else "no checkpoint"
+    note = f"{spec.name} ({last}"
+    lock = spec.final_checkpoint.parent.parent / ".lock"
+    if lock.exists():
+        with open(lock) as handle:
+            try:
+                fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+            except BlockingIOError:
+                note += f", being trained now by pid {handle.read().strip() or 'unknown'}"
+    return note + ")"
 
 
 def copy_atomic(source: Path, destination: Path) -> None:

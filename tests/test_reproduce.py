@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import pytest
 
+import ppo_pgg_discrete
 import reproduce
 from conftest import ROOT
 
@@ -115,3 +116,21 @@ def test_compile_flag_reaches_every_training_command(tmp_path):
     for compile_ in (False, True):
         specs = reproduce.grid(tiny_args(tmp_path, "compile", compile=compile_))
         assert len(specs) == 4 and all(("--compile" in spec.command()) == compile_ for spec in specs)
+
+
+def test_sweeping_an_unfinished_run_is_said_with_its_last_step_and_its_trainer(tmp_path, capsys):
+    args = tiny_args(tmp_path, "partial", variants=("ppo",))
+    assert reproduce.reproduce(args) == 0
+    run = tmp_path / "partial" / "runs" / "CartPole-v1__ppo__s2"
+    (run / "checkpoints" / "step_000002048.pt").unlink()
+    capsys.readouterr()
+    lock = ppo_pgg_discrete.lock_directory(run)  # as a trainer still at work on it would hold it
+    try:
+        assert reproduce.reproduce(replace(args, skip_training=True)) == 0
+    finally:
+        lock.close()
+    err = capsys.readouterr().err
+    assert (f"note: unfinished, so swept up to the last checkpoint: CartPole-v1__ppo__s2 (1,024, being trained now "
+            f"by pid {os.getpid()})") in err  # fmt: skip
+    episodes = (tmp_path / "partial" / "results" / "episodes.csv").read_text().splitlines()
+    assert len(episodes) - 1 == (2 + 1) * 2 * 3  # s1: two checkpoints, s2: one; × γ × episodes
