@@ -649,10 +649,15 @@ def seeds_label(rows) -> str:
 
 
 def panel_title(env: str, rows) -> str:
+    """`env (n seeds, MuJoCo v)`, naming the variants run on another MuJoCo where the others were not."""
     extra = [seeds_label(rows)]
-    versions = sorted({r["mujoco"] for r in rows if other_mujoco(r)})
-    if versions:
-        extra.append(f"MuJoCo {', '.join(versions)}")
+    other = [r for r in rows if other_mujoco(r)]
+    if other:
+        versions = f"MuJoCo {', '.join(sorted({r['mujoco'] for r in other}))}"
+        if len(other) < len(rows):
+            variants = sorted({r["variant"] for r in other}, key=lambda v: (variant_rank(v), v))
+            versions = f"{', '.join(paper_name(v) for v in variants)} on {versions}"
+        extra.append(versions)
     return f"{env} ({', '.join(extra)})"
 
 

@@ -198,8 +198,10 @@ def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, st
 
 def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
     """The paper's figure above ours, both scaled to one width, with a caption strip over each."""
-    from PIL import ImageDraw
+    import matplotlib
+    from PIL import ImageDraw, ImageFont
 
+    font = ImageFont.truetype(str(Path(matplotlib.get_data_path(), "fonts", "ttf", "DejaVuSans.ttf")), 32)  # has a γ
     width = max(paper.width, ours.width)
     scaled = [im.resize((width, round(im.height * width / im.width))) for im in (paper, ours)]
     captions = ("The paper's figure (Qi, Tang, Zhu): continuous PPO with dropout 10%",
@@ -208,7 +210,7 @@ def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
     canvas = Image.new("RGB", (width, sum(im.height + strip for im in scaled)), "white")
     draw, y = ImageDraw.Draw(canvas), 0
     for im, caption in zip(scaled, captions):
-        draw.text((20, y + 15), caption, fill="black", font_size=32)
+        draw.text((20, y + 15), caption, fill="black", font=font)
         canvas.paste(im.convert("RGB"), (0, y + strip))
         y += im.height + strip
     tmp = path.with_name(path.name + ".tmp.png")

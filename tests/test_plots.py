@@ -254,6 +254,10 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
     provenance_md = (tmp_path / "out" / "provenance.md").read_text()
     assert "def5678 | 3.1.6 | sixteen cores" in provenance_md and "abc1234 | 2.3.7 | two cores" in provenance_md
     assert tmp_path / "out" / "provenance.md" in written
+    summary = summary_of(tmp_path / "here", tmp_path / "there", provenance=str(provenance))
+    assert plots.panel_title("Walker2d-v4", [r for r in summary if r["env_id"] == "Walker2d-v4"]) == "Walker2d-v4 (3 seeds, MuJoCo 3.1.6)"
+    mixed = [r for r in summary if r["env_id"] == "Walker2d-v4"] + [dict(r, variant="pgg_drop0.1", mujoco="2.3.7") for r in summary]
+    assert plots.panel_title("Walker2d-v4", mixed) == "Walker2d-v4 (3 seeds, PPO on MuJoCo 3.1.6)"
 
 
 # --- figures --------------------------------------------------------------------------------------
