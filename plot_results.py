@@ -295,7 +295,7 @@ def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
             "step": step, "eval_guidance": gamma, "policy": policy, "null_branch": null_branch,
             "n_seeds": len(seed_means), "n_episodes": sum(len(v) for v in per_seed[key].values()),
             "mean": mean, "ci95": half, "sd": float(np.std(seed_means, ddof=1)) if len(seed_means) > 1 else math.nan,
-            "seed_means": ";".join(f"{m:.4f}" for m in seed_means),
+            "seed_means": ";".join(f"{m:.4f}" for m in seed_means), "seeds": sorted(per_seed[key]),
             "mujoco": mujoco_of(env, config, sources[key[:3]], provenance), "sources": sorted(sources[key[:3]]),
         })  # fmt: skip
     return out

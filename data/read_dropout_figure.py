@@ -118,9 +118,9 @@ def our_summary(episodes: tuple[Path, ...], provenance: Path | None) -> list[dic
 
     try:
         rows = plot_results.select_mode(plot_results.read_episodes([str(p) for p in episodes]), "sample", "learned")
+        return plot_results.summarise(rows, plot_results.read_provenance(str(provenance) if provenance else None))
     except plot_results.InputError as e:
         sys.exit(f"error: {e}")
-    return plot_results.summarise(rows, plot_results.read_provenance(str(provenance) if provenance else None))
 
 
 def dropout_cells(summary: list[dict]) -> dict:
@@ -157,40 +157,62 @@ def comparison_table(readings: list[dict], summary: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def seed_means(row: dict) -> dict[int, float]:
+    return dict(zip(row["seeds"], (float(m) for m in row["seed_means"].split(";")), strict=True))
+
+
 def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, step: int = 1_000_000) -> str:
     """The paper's two claims at `step`, per task: does dropout cost return against PPO (both at γ = 1,
-    Welch's t over seeds), and does guidance cost the dropout models return (γ = 1.2 − γ = 1, the same
-    checkpoints, paired t over seeds)."""
+    Welch's t over seed means), and does guidance cost the dropout models return (γ = 1.2 − γ = 1 on
+    the same checkpoints, paired by seed: mean ± 95% CI, t test). p values are Holm-corrected over
+    the tasks of each column."""
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     from scipy import stats
+
+    from plot_results import holm
 
     cells = dropout_cells(summary)
     read = {(r["env_id"], r["step"], r["line"], r["eval_guidance"]): r["paper_figure_mean"] for r in readings}
-    lines = [f"At {step_label(step)} steps; ours mean ± 95% CI over seeds, p two-sided. The paper's PPO is its table's, "
-             "its dropout values are read off its figure (– where a marker is hidden).", "",
-             "| task | PPO, ours (γ = 1) | dropout, ours (γ = 1) | Welch p | paper: PPO / dropout (γ = 1) "
-             "| dropout γ = 1.2 − γ = 1, ours | paired p | paper: γ = 1.2 − γ = 1 |",
-             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    rows = []
     for env in PANELS:
         at_1, at_12 = cells.get((env, step, 1.0)), cells.get((env, step, 1.2))
         if at_1 is None:
             continue
-        drop_1 = [float(m) for m in at_1["seed_means"].split(";")]
-        shift, paired_p = "–", "–"
+        row = {"env": env, "at_1": at_1, "welch": [], "paired": None}
+        for ppo in [r for r in summary if (r["env_id"], r["variant"], r["step"], r["eval_guidance"]) == (env, "ppo", step, 1.0)]:
+            p = stats.ttest_ind(list(seed_means(at_1).values()), list(seed_means(ppo).values()), equal_var=False).pvalue
+            row["welch"].append((ppo, p))
         if at_12 is not None:
-            drop_12 = [float(m) for m in at_12["seed_means"].split(";")]
-            shift = f"{np.mean(drop_12) - np.mean(drop_1):+.1f}"
-            paired_p = f"{stats.ttest_rel(drop_12, drop_1).pvalue:.2f}"
+            before, after = seed_means(at_1), seed_means(at_12)
+            if set(before) != set(after):
+                sys.exit(f"error: {env} at {step}: γ 1 and 1.2 have different seeds ({sorted(before)} vs {sorted(after)})")
+            diffs = np.array([after[seed] - before[seed] for seed in sorted(before)])
+            half = stats.t.ppf(0.975, len(diffs) - 1) * diffs.std(ddof=1) / np.sqrt(len(diffs))
+            row["paired"] = (diffs.mean(), half, stats.ttest_1samp(diffs, 0.0).pvalue)
+        rows.append(row)
+    welch_holm = iter(holm([p for row in rows for _, p in row["welch"]]))
+    paired_holm = iter(holm([row["paired"][2] for row in rows if row["paired"]]))
+    lines = [f"At {step_label(step)} steps; ours: mean ± 95% CI over seeds; p two-sided, Holm-corrected over the tasks of a "
+             "column in brackets. The paper's PPO is its table's; its dropout values are read off its figure "
+             "(– where a marker is hidden).", "",
+             "| task | PPO, ours (γ = 1) | dropout, ours (γ = 1) | Welch p (Holm) | paper: PPO / dropout (γ = 1) "
+             "| dropout γ = 1.2 − γ = 1, ours, paired by seed | paired p (Holm) | paper: γ = 1.2 − γ = 1 |",
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for row in rows:
+        env, at_1 = row["env"], row["at_1"]
         paper_1, paper_12 = read.get((env, step, "pgg_drop0.1", 1.0)), read.get((env, step, "pgg_drop0.1", 1.2))
         paper_shift = "–" if paper_1 is None or paper_12 is None else f"{paper_12 - paper_1:+.1f}"
         paper_cols = f"{paper_ppo.get((env, step), float('nan')):.1f} / {'–' if paper_1 is None else f'{paper_1:.1f}'}"
-        ppos = [r for r in summary if (r["env_id"], r["variant"], r["step"], r["eval_guidance"]) == (env, "ppo", step, 1.0)]
-        for ppo in ppos or [None]:
+        shift, paired_p = "–", "–"
+        if row["paired"]:
+            mean, half, p = row["paired"]
+            shift, paired_p = f"{mean:+.1f} ± {half:.1f}", f"{p:.3f} ({next(paired_holm):.3f})"
+        for ppo, p in row["welch"] or [(None, None)]:
             if ppo is None:
                 ppo_text, welch_p = "not run", "–"
             else:
                 label = f" (MuJoCo {ppo['mujoco']})" if ppo["mujoco"] != at_1["mujoco"] else ""
-                ppo_text = f"{ppo['mean']:.1f} ± {ppo['ci95']:.1f}{label}"
-                welch_p = f"{stats.ttest_ind_from_stats(at_1['mean'], at_1['sd'], at_1['n_seeds'], ppo['mean'], ppo['sd'], ppo['n_seeds'], equal_var=False).pvalue:.2f}"
+                ppo_text, welch_p = f"{ppo['mean']:.1f} ± {ppo['ci95']:.1f}{label}", f"{p:.3f} ({next(welch_holm):.3f})"
             lines.append(f"| {env} | {ppo_text} | {at_1['mean']:.1f} ± {at_1['ci95']:.1f} | {welch_p} | {paper_cols} "
                          f"| {shift} | {paired_p} | {paper_shift} |")  # fmt: skip
     return "\n".join(lines) + "\n"
@@ -218,10 +240,15 @@ def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
     os.replace(tmp, path)
 
 
+def open_image(path: Path) -> Image.Image:
+    try:
+        return Image.open(path)
+    except (OSError, ValueError) as e:  # a missing file, or one PIL cannot read as an image
+        sys.exit(f"error: cannot read {path} as an image: {e}")
+
+
 def main(args: Args) -> None:
-    if not args.figure.is_file():
-        sys.exit(f"error: no figure at {args.figure}")
-    paper = Image.open(args.figure)
+    paper = open_image(args.figure)
     if paper.size != FIGURE_SIZE:
         sys.exit(f"error: {args.figure} is {paper.size[0]}x{paper.size[1]}; the calibration is for the paper's {FIGURE_SIZE[0]}x{FIGURE_SIZE[1]} rendering")
     if (args.beside is None) != (args.output is None):
@@ -231,12 +258,16 @@ def main(args: Args) -> None:
     for given in (args.beside, args.provenance, *(args.ours or ())):
         if given is not None and not given.is_file():
             sys.exit(f"error: no file at {given}")
+    for written in (args.csv, args.output, args.table):
+        if written is not None and not written.parent.is_dir():
+            sys.exit(f"error: no directory {written.parent} to write {written.name} into")
+    ours_figure = open_image(args.beside) if args.beside is not None else None
     rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
     if args.csv is not None:
         write_csv(rows, args.csv)
         print(f"wrote {args.csv} ({sum(r['paper_figure_mean'] is not None for r in rows)} of {len(rows)} markers read)")
     if args.beside is not None:
-        side_by_side(paper, Image.open(args.beside), args.output)
+        side_by_side(paper, ours_figure, args.output)
         print(f"wrote {args.output}")
     if args.ours is not None:
         summary = our_summary(args.ours, args.provenance)

@@ -256,7 +256,8 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
     assert tmp_path / "out" / "provenance.md" in written
     summary = summary_of(tmp_path / "here", tmp_path / "there", provenance=str(provenance))
     assert plots.panel_title("Walker2d-v4", [r for r in summary if r["env_id"] == "Walker2d-v4"]) == "Walker2d-v4 (3 seeds, MuJoCo 3.1.6)"
-    mixed = [r for r in summary if r["env_id"] == "Walker2d-v4"] + [dict(r, variant="pgg_drop0.1", mujoco="2.3.7") for r in summary]
+    walker = [r for r in summary if r["env_id"] == "Walker2d-v4"]
+    mixed = walker + [dict(r, variant="pgg_drop0.1", mujoco="2.3.7") for r in walker]
     assert plots.panel_title("Walker2d-v4", mixed) == "Walker2d-v4 (3 seeds, PPO on MuJoCo 3.1.6)"
 
 
@@ -462,15 +463,14 @@ def test_learning_curves_never_count_one_seed_twice(tmp_path):
 
 
 PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"
+sys.path.insert(0, str(ROOT / "data"))
+import read_dropout_figure as reader  # noqa: E402
 
 
 @pytest.mark.skipif(not PAPER_DROPOUT_FIGURE.is_file(), reason="the paper's figures are in ../shared/paper, not in the repository")
-def test_dropout_figure_reading_recovers_the_papers_ppo_table_and_sets_ours_beside_it(tmp_path):
+def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
     # The figure's PPO markers are the paper's PPO table at 200k and 1M: the pixel-to-return calibration
     # must give those numbers back, to within 1% of each panel's y range.
-    sys.path.insert(0, str(ROOT / "data"))
-    import read_dropout_figure as reader
-
     out = tmp_path / "readings.csv"
     reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, csv=out))
     with open(ROOT / "data" / "paper_results.csv") as f:
@@ -488,18 +488,25 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table_and_sets_ours_besi
     assert checked >= 8
     with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
         assert list(csv.DictReader(f)) == readings  # the committed readings are this script's
-    # our cells: seed means 920, 930, 940 -> 930.0 ± 24.8 (t(.975, 2) · 10 / √3); the paper read 920.0 and 985.6
+
+
+def test_dropout_tables_set_our_cells_beside_the_readings(tmp_path):
+    readings = [{"env_id": "InvertedPendulum-v4", "step": 1_000_000, "line": "pgg_drop0.1", "eval_guidance": gamma,
+                 "paper_figure_mean": value} for gamma, value in ((1.0, 920.0), (1.1, None), (1.2, 985.6))]  # fmt: skip
+    # seed means 920, 930, 940 -> 930.0 ± 24.8 (t(.975, 2) · 10 / √3); γ 1.2 is +40, +20, +30 on the same seeds
     drop_1, drop_12, ppo = [920.0, 930.0, 940.0], [960.0, 950.0, 970.0], [990.0, 1000.0, 1010.0]
     ours = {("InvertedPendulum-v4", "pgg_drop0.1", 1_000_000, 1.0): drop_1,
             ("InvertedPendulum-v4", "pgg_drop0.1", 1_000_000, 1.2): drop_12,
             ("InvertedPendulum-v4", "ppo", 1_000_000, 1.0): ppo}  # fmt: skip
     write_episodes(tmp_path / "episodes.csv", episode_rows(ours))
-    reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, ours=(tmp_path / "episodes.csv",), table=tmp_path / "table.md"))
-    table = (tmp_path / "table.md").read_text()
+    summary = reader.our_summary((tmp_path / "episodes.csv",), None)
+    table = reader.comparison_table(readings, summary)
     assert "| InvertedPendulum-v4 | 1M | 1 | 920.0 | 930.0 ± 24.8 | yes |" in table
     assert "| InvertedPendulum-v4 | 1M | 1.2 | 985.6 | 960.0 ± 24.8 | **no** |" in table
+    assert "| InvertedPendulum-v4 | 1M | 1.1 | hidden under another marker | 940.0" not in table  # no such cell of ours
     assert "| InvertedPendulum-v4 | 1M | 1.1 | hidden under another marker | not run |  |" in table
+    effects = reader.effects_table(readings, summary, {("InvertedPendulum-v4", 1_000_000): 864.7})
     welch = stats.ttest_ind(drop_1, ppo, equal_var=False).pvalue
-    paired = stats.ttest_rel(drop_12, drop_1).pvalue
-    assert (f"| InvertedPendulum-v4 | 1000.0 ± 24.8 | 930.0 ± 24.8 | {welch:.2f} | 864.7 / 920.0 | +30.0 | {paired:.2f} "
-            "| +65.6 |") in table  # fmt: skip
+    paired = stats.ttest_rel(drop_12, drop_1).pvalue  # one task: Holm leaves each p as it is
+    assert (f"| InvertedPendulum-v4 | 1000.0 ± 24.8 | 930.0 ± 24.8 | {welch:.3f} ({welch:.3f}) | 864.7 / 920.0 "
+            f"| +30.0 ± 24.8 | {paired:.3f} ({paired:.3f}) | +65.6 |") in effects  # fmt: skip

@@ -132,5 +132,7 @@ def test_sweeping_an_unfinished_run_is_said_with_its_last_step_and_its_trainer(t
     err = capsys.readouterr().err
     assert (f"note: unfinished, so swept up to the last checkpoint: CartPole-v1__ppo__s2 (1,024, being trained now "
             f"by pid {os.getpid()})") in err  # fmt: skip
+    assert reproduce.reproduce(replace(args, skip_training=True)) == 0  # its trainer gone, the lock free
+    assert "CartPole-v1__ppo__s2 (1,024)" in capsys.readouterr().err
     episodes = (tmp_path / "partial" / "results" / "episodes.csv").read_text().splitlines()
     assert len(episodes) - 1 == (2 + 1) * 2 * 3  # s1: two checkpoints, s2: one; × γ × episodes
