@@ -332,10 +332,10 @@ def reproduce(args: Args) -> int:
 
 def unfinished_note(spec: RunSpec) -> str:
     """`name (last checkpoint's step)`, and who is training it now where its run directory is locked."""
-    checkpoints = sorted(spec.final_checkpoint.parent.glob("step_*.pt"))
-    last = f"{int(checkpoints[-1].stem.split('_')[1]):,}" if checkpoints else "no checkpoint"
-    note = f"{spec.name} ({last}"
-    lock = spec.final_checkpoint.parent.parent / ".lock"
+    run_dir = Path(spec.root) / spec.name
+    latest = training_module(spec.env_id).latest_checkpoint(run_dir)
+    note = f"{spec.name} ({int(latest.stem.split('_')[1]):,}" if latest else f"{spec.name} (no checkpoint"
+    lock = run_dir / ".lock"
     if lock.exists():
         with open(lock) as handle:
             try:

@@ -21,6 +21,7 @@ the paper gives no numbers for them.
 """
 
 import csv
+import math
 import os
 import sys
 from dataclasses import dataclass
@@ -29,6 +30,10 @@ from pathlib import Path
 import numpy as np
 import tyro
 from PIL import Image
+from scipy import stats
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import plot_results  # from the repository root, added to the path above
 
 FIGURE_SIZE = (2586, 1319)  # the calibration below holds for this rendering of the figure only
 # (line, eval γ) -> marker colour: the dropout model's lines in the legend's viridis, and the paper's PPO
@@ -95,27 +100,8 @@ def read_markers(pixels: np.ndarray) -> list[dict]:
     return rows
 
 
-def write_text(path: Path, write) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
-        write(f)
-    os.replace(tmp, path)
-
-
-def write_csv(rows: list[dict], path: Path) -> None:
-    def write(f):
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows({k: "" if v is None else v for k, v in row.items()} for row in rows)
-
-    write_text(path, write)
-
-
 def our_summary(episodes: tuple[Path, ...], provenance: Path | None) -> list[dict]:
     """plot_results' summary (statistics over seeds per cell) of our sweeps, sampled actions, learned null."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-    import plot_results
-
     try:
         rows = plot_results.select_mode(plot_results.read_episodes([str(p) for p in episodes]), "sample", "learned")
         return plot_results.summarise(rows, plot_results.read_provenance(str(provenance) if provenance else None))
@@ -136,10 +122,6 @@ def dropout_cells(summary: list[dict]) -> dict:
     return cells
 
 
-def step_label(step: int) -> str:
-    return "1M" if step == 1_000_000 else f"{step // 1000}k"
-
-
 def comparison_table(readings: list[dict], summary: list[dict]) -> str:
     """Each read marker beside our cell: our mean ± 95% CI, and whether the paper's value lies inside."""
     cells = dropout_cells(summary)
@@ -153,7 +135,7 @@ def comparison_table(readings: list[dict], summary: list[dict]) -> str:
         paper_text = "hidden under another marker" if paper is None else f"{paper:.1f}"
         ours_text = "not run" if ours is None else f"{ours['mean']:.1f} ± {ours['ci95']:.1f}"
         inside = "" if paper is None or ours is None else ("yes" if abs(paper - ours["mean"]) <= ours["ci95"] else "**no**")
-        lines.append(f"| {r['env_id']} | {step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
+        lines.append(f"| {r['env_id']} | {plot_results.step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
     return "\n".join(lines) + "\n"
 
 
@@ -166,11 +148,6 @@ def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, st
     Welch's t over seed means), and does guidance cost the dropout models return (γ = 1.2 − γ = 1 on
     the same checkpoints, paired by seed: mean ± 95% CI, t test). p values are Holm-corrected over
     the tasks of each column."""
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-    from scipy import stats
-
-    from plot_results import holm
-
     cells = dropout_cells(summary)
     read = {(r["env_id"], r["step"], r["line"], r["eval_guidance"]): r["paper_figure_mean"] for r in readings}
     rows = []
@@ -190,13 +167,13 @@ def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, st
             half = stats.t.ppf(0.975, len(diffs) - 1) * diffs.std(ddof=1) / np.sqrt(len(diffs))
             row["paired"] = (diffs.mean(), half, stats.ttest_1samp(diffs, 0.0).pvalue)
         rows.append(row)
-    welch_holm = iter(holm([p for row in rows for _, p in row["welch"]]))
-    paired_holm = iter(holm([row["paired"][2] for row in rows if row["paired"]]))
-    lines = [f"At {step_label(step)} steps; ours: mean ± 95% CI over seeds; p two-sided, Holm-corrected over the tasks of a "
-             "column in brackets. The paper's PPO is its table's; its dropout values are read off its figure "
-             "(– where a marker is hidden).", "",
-             "| task | PPO, ours (γ = 1) | dropout, ours (γ = 1) | Welch p (Holm) | paper: PPO / dropout (γ = 1) "
-             "| dropout γ = 1.2 − γ = 1, ours, paired by seed | paired p (Holm) | paper: γ = 1.2 − γ = 1 |",
+    welch_holm = iter(plot_results.holm([p for row in rows for _, p in row["welch"]]))
+    paired_holm = iter(plot_results.holm([row["paired"][2] for row in rows if row["paired"]]))
+    lines = [(f"At {plot_results.step_label(step)} steps; ours: mean ± 95% CI over seeds; p two-sided, Holm-corrected "
+              "over the tasks of a column in brackets. The paper's PPO is its table's; its dropout values are read off "
+              "its figure (– where a marker is hidden)."), "",
+             ("| task | PPO, ours (γ = 1) | dropout, ours (γ = 1) | Welch p (Holm) | paper: PPO / dropout (γ = 1) "
+              "| dropout γ = 1.2 − γ = 1, ours, paired by seed | paired p (Holm) | paper: γ = 1.2 − γ = 1 |"),
              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for row in rows:
         env, at_1 = row["env"], row["at_1"]
@@ -264,7 +241,8 @@ def main(args: Args) -> None:
     ours_figure = open_image(args.beside) if args.beside is not None else None
     rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
     if args.csv is not None:
-        write_csv(rows, args.csv)
+        unread_as_nan = [{**r, "paper_figure_mean": math.nan if r["paper_figure_mean"] is None else r["paper_figure_mean"]} for r in rows]
+        plot_results.write_csv(args.csv, unread_as_nan, [])  # NaN is written as an empty field
         print(f"wrote {args.csv} ({sum(r['paper_figure_mean'] is not None for r in rows)} of {len(rows)} markers read)")
     if args.beside is not None:
         side_by_side(paper, ours_figure, args.output)
@@ -276,7 +254,7 @@ def main(args: Args) -> None:
         text = ("# The dropout ablation against the paper's figure\n\n## Does dropout, or guidance on top of it, cost return?\n\n"
                 + effects_table(rows, summary, paper_ppo) + "\n## Every read marker beside our cell\n\n"
                 + comparison_table(rows, summary))  # fmt: skip
-        write_text(args.table, lambda f: f.write(text))
+        plot_results.write(args.table, text, [])
         print(f"wrote {args.table}")
 
 
