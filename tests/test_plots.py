@@ -510,3 +510,42 @@ def test_dropout_tables_set_our_cells_beside_the_readings(tmp_path):
     paired = stats.ttest_rel(drop_12, drop_1).pvalue  # one task: Holm leaves each p as it is
     assert (f"| InvertedPendulum-v4 | 1000.0 ± 24.8 | 930.0 ± 24.8 | {welch:.3f} ({welch:.3f}) | 864.7 / 920.0 "
             f"| +30.0 ± 24.8 | {paired:.3f} ({paired:.3f}) | +65.6 |") in effects  # fmt: skip
+
+
+# --- two sweeps of one grid (benchmarks/compare_sweeps.py) -----------------------------------------
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+import compare_sweeps
+
+
+def test_two_sweeps_are_compared_cell_by_cell(tmp_path):
+    shifted = dict(SEED_MEANS)
+    shifted[("CartPole-v1", "ppo", 200000, 1.0)] = [400, 401, 402]  # +100 with a seed sd of 1: significant
+    write_episodes(tmp_path / "a.csv", episode_rows(SEED_MEANS))
+    write_episodes(tmp_path / "b.csv", episode_rows({k: v for k, v in shifted.items() if k[0] == "CartPole-v1"}))
+    rows = compare_sweeps.compare(compare_sweeps.cells(str(tmp_path / "b.csv")),
+                                  compare_sweeps.cells(str(tmp_path / "a.csv")), "a")  # fmt: skip
+    assert len(rows) == 6  # the Acrobot cells of a have no counterpart
+    by_cell = {(r["env_id"], r["variant"], r["step"], r["eval_guidance"]): r for r in rows}
+    moved = by_cell[("CartPole-v1", "ppo", 200000, 1.0)]
+    assert moved["diff"] == pytest.approx(100) and moved["significant"] == "True"
+    assert all(r["diff"] == 0 and r["significant"] == "False" for k, r in by_cell.items() if k != ("CartPole-v1", "ppo", 200000, 1.0))
+    text = compare_sweeps.report(rows, ("b", "a"), ("b.csv", "a.csv"))
+    assert "6 cells in both; **1 differ significantly**" in text
+    assert "| CartPole-v1 | PPO | 2 | 1 | 1 | 1 / 0, 1 tied (p = 1.000) |" in text
+
+
+def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
+    write_episodes(tmp_path / "cartpole.csv", episode_rows({k: v for k, v in SEED_MEANS.items() if k[0] == "CartPole-v1"}))
+    write_episodes(tmp_path / "acrobot.csv", episode_rows({k: v for k, v in SEED_MEANS.items() if k[0] == "Acrobot-v1"}))
+    two_configs = episode_rows(SEED_MEANS, config="learning_rate=0.1") + episode_rows(SEED_MEANS, config="learning_rate=0.2", run_suffix="b")
+    write_episodes(tmp_path / "two_configs.csv", two_configs)
+    for pair, message in [(("cartpole.csv", "acrobot.csv"), "no cell (env, variant, step, eval γ) in common"),
+                          (("two_configs.csv", "cartpole.csv"), "2 configurations of ppo on Acrobot-v1"),
+                          (("missing.csv", "cartpole.csv"), "no sweep CSV at")]:  # fmt: skip
+        monkeypatch.setattr(sys, "argv", ["compare_sweeps.py", *(str(tmp_path / p) for p in pair)])
+        with pytest.raises(SystemExit) as exit_info:
+            compare_sweeps.main()
+        err = capsys.readouterr().err
+        assert exit_info.value.code == 2
+        assert err.count("\n") == 1 and err.startswith("error: ") and message in err, err

@@ -1,0 +1,130 @@
+"""Two sweeps of one grid, cell by cell: the same configurations trained on two software stacks
+(MuJoCo versions, machines) or at two code revisions. It is the cross-stack check of the results:
+
+    python benchmarks/compare_sweeps.py results/continuous_onestack/episodes.csv \\
+        results/continuous_device/episodes.csv --labels "MuJoCo 2.3.7" "MuJoCo 3.1.6" \\
+        --output results/continuous_onestack/compare_stacks.md
+
+A cell is (env, variant, checkpoint step, eval γ) with sampled actions and the learned null branch,
+its statistic the mean over seeds of each seed's mean return, as everywhere in `plot_results.py`.
+Each cell present in both sweeps gets Welch's t test on the two sets of seed means, Holm-corrected
+over all the compared cells; per env and variant a sign test of first-above vs first-below. The
+seeds are not paired: seed 1 on two stacks is two unrelated runs.
+"""
+
+import math
+import sys
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tyro
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import plot_results as plots
+
+
+@dataclass
+class Args:
+    first: tyro.conf.Positional[str]
+    """a sweep's episodes.csv (or its folder): the side whose differences are reported (first − second)"""
+    second: tyro.conf.Positional[str]
+    """the other sweep of the same grid"""
+    labels: tuple[str, str] = ("first", "second")
+    """names of the two sides in the report"""
+    output: str | None = None
+    """the Markdown report's path (printed to stdout if not given)"""
+
+
+def cells(path: str) -> dict:
+    """{(env, variant, step, eval γ): summary row} of one sweep; one configuration per env and variant."""
+    rows = plots.summarise(plots.select_mode(plots.read_episodes([path]), "sample", "learned"))
+    configs = defaultdict(set)
+    for r in rows:
+        configs[(r["env_id"], r["variant"])].add(r["config"])
+    for (env, variant), found in configs.items():
+        if len(found) > 1:
+            raise plots.InputError(f"{path} has {len(found)} configurations of {variant} on {env}; compare one at a time")
+    return {(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])): r for r in rows}
+
+
+def compare(first: dict, second: dict, second_label: str) -> list[dict]:
+    """One row per cell of both sweeps, first against second (Welch), Holm over all of them."""
+    shared = sorted(first.keys() & second.keys(), key=lambda k: (k[0], plots.variant_rank(k[1]), k[1], k[2], k[3]))
+    if not shared:
+        raise plots.InputError("the two sweeps have no cell (env, variant, step, eval γ) in common")
+    out = []
+    for key in shared:
+        other = second[key]
+        out.append(plots.compare_row(first[key], second_label, float(other["mean"]), float(other["ci95"]),
+                                     float(other["sd"]), int(other["n_seeds"])))  # fmt: skip
+    for row, adjusted in zip(out, plots.holm([r["p"] for r in out])):
+        row["p_holm"] = adjusted
+        row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < plots.ALPHA)
+    return out
+
+
+def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str]) -> str:
+    first, second = labels
+    n_sig = sum(r["significant"] == "True" for r in rows)
+    lines = [f"# {first} against {second}, cell by cell", "",
+             f"- {first}: `{sources[0]}`", f"- {second}: `{sources[1]}`", "",
+             (f"{len(rows)} cells in both; **{n_sig} differ significantly** (Welch's t on the per-seed means, "
+             f"Holm-corrected over the {len(rows)} cells, family-wise α = {plots.ALPHA}). Sign test: {first} above "
+             f"vs below {second} over a group's cells, ties left out; the cells of a group share their runs, so "
+             "read its p-value as a description. diff = first − second."), "",
+             (f"| env | variant | cells | differ after Holm | p < 0.05 uncorrected | {first} above / below (sign test) "
+             f"| mean diff % (range) | {first} − {second}, final step, eval γ 1 |"),
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    groups = defaultdict(list)
+    for r in rows:
+        groups[(r["env_id"], r["variant"])].append(r)
+    for (env, variant), group in groups.items():
+        above, below, ties, p_sign = plots.sign_test([r["diff"] for r in group])
+        pct = [r["diff_pct"] for r in group if not math.isnan(r["diff_pct"])]
+        raw = sum(1 for r in group if not math.isnan(r["p"]) and r["p"] < plots.ALPHA)
+        final = [r for r in group if r["step"] == max(g["step"] for g in group) and r["eval_guidance"] == 1.0]
+        final_text = "–"
+        if final:
+            f = final[0]
+            final_text = (f"{plots.step_label(f['step'])}: {plots.fmt(f['our_mean'])} ± {plots.fmt(f['our_ci95'])} vs "
+                          f"{plots.fmt(f['ref_mean'])} ± {plots.fmt(f['ref_ci95'])} ({plots.p_is(f['p'])})")  # fmt: skip
+        spread = f"{np.mean(pct):+.1f}% ({min(pct):+.0f} to {max(pct):+.0f})" if pct else "–"
+        lines.append(f"| {env} | {plots.paper_name(variant)} | {len(group)} | "
+                     f"{sum(r['significant'] == 'True' for r in group)} | {raw} | "
+                     f"{above} / {below}{f', {ties} tied' if ties else ''}"
+                     f"{f' ({plots.p_is(p_sign)})' if above + below else ''} | {spread} | "
+                     f"{final_text} |")  # fmt: skip
+    lines += ["", "## Cells", "",
+              f"| env | variant | step | eval γ | {first} | {second} | diff | diff % | Welch p | Holm p | g |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in rows:
+        mark = " ✗" if r["significant"] == "True" else ""
+        lines.append(f"| {r['env_id']} | {plots.paper_name(r['variant'])} | {plots.step_label(r['step'])} | {r['eval_guidance']:g} | "
+                     f"{plots.fmt(r['our_mean'])} ± {plots.fmt(r['our_ci95'])} | "
+                     f"{plots.fmt(r['ref_mean'])} ± {plots.fmt(r['ref_ci95'])} | {r['diff']:+.1f} | "
+                     f"{plots.fmt(r['diff_pct'])} | {plots.fmt_p(r['p'])} | {plots.fmt_p(r['p_holm'])}{mark} | "
+                     f"{plots.fmt(r['hedges_g'], 2)} |")  # fmt: skip
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    args = tyro.cli(Args)
+    try:
+        rows = compare(cells(args.first), cells(args.second), args.labels[1])
+        text = report(rows, args.labels, (args.first, args.second))
+        if args.output:
+            plots.write(Path(args.output), text, [])
+        else:
+            print(text, end="")
+    except plots.InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    except OSError as e:
+        print(f"error: cannot write {e.filename or args.output}: {e.strerror or e}", file=sys.stderr)
+        sys.exit(2)
+
+
+if __name__ == "__main__":
+    main()
