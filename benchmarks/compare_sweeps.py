@@ -45,8 +45,22 @@ def cells(path: str) -> dict:
         configs[(r["env_id"], r["variant"])].add(r["config"])
     for (env, variant), found in configs.items():
         if len(found) > 1:
-            raise plots.InputError(f"{path} has {len(found)} configurations of {variant} on {env}; compare one at a time")
+            raise plots.InputError(
+                f"{path} has {len(found)} configurations of {variant} on {env}; compare one at a time"
+            )
     return {(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])): r for r in rows}
+
+
+def check_same_config(first: dict, second: dict) -> None:
+    """The two sides of a cell must be one configuration, the stack (`mujoco=`) aside. A sweep from before
+    configs were recorded has the variant alone, and is taken to be the variant's defaults."""
+    for key in first.keys() & second.keys():
+        tokens = [plots.config_tokens(side[key]["config"]) for side in (first, second)]
+        for t in tokens:
+            t.pop("mujoco", None)
+        if tokens[0] != tokens[1]:
+            raise plots.InputError(f"{key[1]} on {key[0]} is '{first[key]['config']}' in one sweep and "
+                                   f"'{second[key]['config']}' in the other; compare one configuration")  # fmt: skip
 
 
 def compare(first: dict, second: dict, second_label: str) -> list[dict]:
@@ -54,6 +68,7 @@ def compare(first: dict, second: dict, second_label: str) -> list[dict]:
     shared = sorted(first.keys() & second.keys(), key=lambda k: (k[0], plots.variant_rank(k[1]), k[1], k[2], k[3]))
     if not shared:
         raise plots.InputError("the two sweeps have no cell (env, variant, step, eval γ) in common")
+    check_same_config(first, second)
     out = []
     for key in shared:
         other = second[key]
@@ -65,11 +80,13 @@ def compare(first: dict, second: dict, second_label: str) -> list[dict]:
     return out
 
 
-def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str]) -> str:
+def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str], unmatched: tuple[int, int]) -> str:
+    """`unmatched`: how many cells of each sweep have no counterpart in the other (left out)."""
     first, second = labels
     n_sig = sum(r["significant"] == "True" for r in rows)
     lines = [f"# {first} against {second}, cell by cell", "",
-             f"- {first}: `{sources[0]}`", f"- {second}: `{sources[1]}`", "",
+             f"- {first}: `{sources[0]}` ({unmatched[0]} of its cells not in the other, left out)",
+             f"- {second}: `{sources[1]}` ({unmatched[1]} of its cells not in the other, left out)", "",
              (f"{len(rows)} cells in both; **{n_sig} differ significantly** (Welch's t on the per-seed means, "
              f"Holm-corrected over the {len(rows)} cells, family-wise α = {plots.ALPHA}). Sign test: {first} above "
              f"vs below {second} over a group's cells, ties left out; the cells of a group share their runs, so "
@@ -112,8 +129,10 @@ def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str]) 
 def main() -> None:
     args = tyro.cli(Args)
     try:
-        rows = compare(cells(args.first), cells(args.second), args.labels[1])
-        text = report(rows, args.labels, (args.first, args.second))
+        first, second = cells(args.first), cells(args.second)
+        rows = compare(first, second, args.labels[1])
+        unmatched = (len(first.keys() - second.keys()), len(second.keys() - first.keys()))
+        text = report(rows, args.labels, (args.first, args.second), unmatched)
         if args.output:
             plots.write(Path(args.output), text, [])
         else:

@@ -521,18 +521,34 @@ import compare_sweeps
 def test_two_sweeps_are_compared_cell_by_cell(tmp_path):
     shifted = dict(SEED_MEANS)
     shifted[("CartPole-v1", "ppo", 200000, 1.0)] = [400, 401, 402]  # +100 with a seed sd of 1: significant
+    shifted[("CartPole-v1", "ppo", 100000, 1.0)] = [273, 274, 276]  # p ≈ 0.02 alone, not after Holm over 6
     write_episodes(tmp_path / "a.csv", episode_rows(SEED_MEANS))
-    write_episodes(tmp_path / "b.csv", episode_rows({k: v for k, v in shifted.items() if k[0] == "CartPole-v1"}))
+    write_episodes(tmp_path / "b.csv", episode_rows({k: v for k, v in shifted.items() if k[0] == "CartPole-v1"},
+                                                    config="mujoco=3.1.6"))  # fmt: skip
     rows = compare_sweeps.compare(compare_sweeps.cells(str(tmp_path / "b.csv")),
                                   compare_sweeps.cells(str(tmp_path / "a.csv")), "a")  # fmt: skip
     assert len(rows) == 6  # the Acrobot cells of a have no counterpart
     by_cell = {(r["env_id"], r["variant"], r["step"], r["eval_guidance"]): r for r in rows}
     moved = by_cell[("CartPole-v1", "ppo", 200000, 1.0)]
     assert moved["diff"] == pytest.approx(100) and moved["significant"] == "True"
-    assert all(r["diff"] == 0 and r["significant"] == "False" for k, r in by_cell.items() if k != ("CartPole-v1", "ppo", 200000, 1.0))
-    text = compare_sweeps.report(rows, ("b", "a"), ("b.csv", "a.csv"))
-    assert "6 cells in both; **1 differ significantly**" in text
-    assert "| CartPole-v1 | PPO | 2 | 1 | 1 | 1 / 0, 1 tied (p = 1.000) |" in text
+    moderate = by_cell[("CartPole-v1", "ppo", 100000, 1.0)]
+    expected_p = stats.ttest_ind([273, 274, 276], [270, 271, 272], equal_var=False).pvalue
+    assert moderate["p"] == pytest.approx(expected_p, rel=1e-6) and 0.01 < expected_p < 0.05
+    p_values = sorted(r["p"] for r in rows)
+    assert moderate["p_holm"] == pytest.approx(max(6 * p_values[0], 5 * expected_p)) and moderate["significant"] == "False"
+    unmoved = [r for r in by_cell.values() if r is not moved and r is not moderate]
+    assert len(unmoved) == 4 and all(r["diff"] == 0 and r["significant"] == "False" for r in unmoved)
+    text = compare_sweeps.report(rows, ("b", "a"), ("b.csv", "a.csv"), (0, 6))
+    assert "6 cells in both; **1 differ significantly**" in text and "(6 of its cells not in the other, left out)" in text
+    assert "| CartPole-v1 | PPO | 2 | 1 | 2 | 2 / 0 (p = 0.500) |" in text
+    assert "| 200k: 401.0 ± 2.5 vs 301.0 ± 2.5 (p < 0.001) |" in text  # the final step of the grid, eval γ 1
+
+
+def test_compare_sweeps_refuses_two_configurations(tmp_path):
+    write_episodes(tmp_path / "a.csv", episode_rows(SEED_MEANS, config="learning_rate=0.1"))
+    write_episodes(tmp_path / "b.csv", episode_rows(SEED_MEANS, config="mujoco=3.1.6"))
+    with pytest.raises(plots.InputError, match=r"'(\S+) learning_rate=0.1' in one sweep and '\1 mujoco=3.1.6'"):
+        compare_sweeps.compare(compare_sweeps.cells(str(tmp_path / "a.csv")), compare_sweeps.cells(str(tmp_path / "b.csv")), "b")
 
 
 def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
