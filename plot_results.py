@@ -954,6 +954,13 @@ def holm(p_values: list[float]) -> list[float]:
     return adjusted
 
 
+def correct_family(rows: list[dict]) -> None:
+    """Sets each row's `p_holm` and `significant` from Holm's correction over these rows' `p`."""
+    for row, adjusted in zip(rows, holm([row["p"] for row in rows])):
+        row["p_holm"] = adjusted
+        row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < ALPHA)
+
+
 def sign_test(differences) -> tuple[int, int, int, float]:
     """(above, below, ties, two-sided exact binomial p) of the signs of ours − reference."""
     above = sum(d > 0 for d in differences)
@@ -1026,10 +1033,7 @@ def compare_with_paper(summary) -> list[dict]:
             ci = float(p["ci95"])
             out.append(compare_row(r, "paper", float(p["mean"]), ci, sd_from_ci(ci, PAPER_SEEDS), PAPER_SEEDS))
     for kind in ("discrete", "continuous"):
-        family = [row for row in out if kind_of(row["env_id"]) == kind]
-        for row, adjusted in zip(family, holm([row["p"] for row in family])):
-            row["p_holm"] = adjusted
-            row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < ALPHA)
+        correct_family([row for row in out if kind_of(row["env_id"]) == kind])
     cleanrl = []
     for r in summary:
         env = r["env_id"]
@@ -1039,9 +1043,7 @@ def compare_with_paper(summary) -> list[dict]:
             sd = sd_population * math.sqrt(CLEANRL_SEEDS / (CLEANRL_SEEDS - 1))
             ci = float(stats.t.ppf(0.975, CLEANRL_SEEDS - 1)) * sd / math.sqrt(CLEANRL_SEEDS)
             cleanrl.append(compare_row(r, "cleanrl", mean, ci, sd, CLEANRL_SEEDS))
-    for row, adjusted in zip(cleanrl, holm([row["p"] for row in cleanrl])):
-        row["p_holm"] = adjusted
-        row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < ALPHA)
+    correct_family(cleanrl)
     return out + cleanrl
 
 

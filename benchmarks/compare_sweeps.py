@@ -74,9 +74,7 @@ def compare(first: dict, second: dict, second_label: str) -> list[dict]:
         other = second[key]
         out.append(plots.compare_row(first[key], second_label, float(other["mean"]), float(other["ci95"]),
                                      float(other["sd"]), int(other["n_seeds"])))  # fmt: skip
-    for row, adjusted in zip(out, plots.holm([r["p"] for r in out])):
-        row["p_holm"] = adjusted
-        row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < plots.ALPHA)
+    plots.correct_family(out)
     return out
 
 
@@ -101,7 +99,8 @@ def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str], 
         above, below, ties, p_sign = plots.sign_test([r["diff"] for r in group])
         pct = [r["diff_pct"] for r in group if not math.isnan(r["diff_pct"])]
         raw = sum(1 for r in group if not math.isnan(r["p"]) and r["p"] < plots.ALPHA)
-        final = [r for r in group if r["step"] == max(g["step"] for g in group) and r["eval_guidance"] == 1.0]
+        last_step = max(r["step"] for r in group)
+        final = [r for r in group if r["step"] == last_step and r["eval_guidance"] == 1.0]
         final_text = "–"
         if final:
             f = final[0]
