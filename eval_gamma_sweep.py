@@ -65,6 +65,8 @@ from scipy import stats
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
+from pgg_utils import runs
+from pgg_utils.arguments import RUN_ONLY_ARGS, guidance_error
 
 PAPER_GAMMAS = {
     "discrete": (1.0, 1.5, 2.0, 5.0, 10.0, 20.0),
@@ -178,7 +180,7 @@ def config_label(ckpt: dict) -> str:
     E.g. `pgg_g1.1 learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`."""
     module = TRAINING_MODULES[ckpt["action_space"]]
     train_args, defaults = ckpt["args"], training_defaults(ckpt["action_space"])
-    excluded = module.RUN_ONLY_ARGS | OWN_COLUMNS
+    excluded = RUN_ONLY_ARGS | OWN_COLUMNS
     words = [variant_label(train_args["guidance"], train_args["cond_dropout"])]
     for key in sorted(defaults.keys() - excluded):
         value = train_args.get(key, defaults[key])
@@ -572,7 +574,7 @@ def check_args(args: Args) -> None:
         if not args.gammas:
             raise InputError("--gammas needs at least one value (leave it out for the paper's)")
         for gamma in args.gammas:
-            if error := ppo_pgg_discrete.guidance_error(gamma, "--gammas"):  # the training scripts' rule
+            if error := guidance_error(gamma, "--gammas"):  # the training scripts' rule
                 raise InputError(error)
     if args.steps is not None and not args.steps:
         raise InputError("--steps needs at least one value (leave it out for every checkpoint)")
@@ -819,7 +821,7 @@ def record_videos(args: Args) -> list[Path]:
         probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
     except Exception as e:  # a missing dependency (Pusher-v4 on mujoco 3), a bad MUJOCO_GL, ...
         raise InputError(f"cannot make environment {ckpt['env_id']!r}: {e}") from None
-    error = TRAINING_MODULES[ckpt["action_space"]].video_error(probe)  # the training scripts' check: moviepy, a renderer
+    error = runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30
     probe.close()
     if error:

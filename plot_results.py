@@ -55,8 +55,7 @@ import numpy as np  # noqa: E402
 import tyro  # noqa: E402
 from scipy import stats  # noqa: E402
 
-import ppo_pgg_continuous  # noqa: E402
-import ppo_pgg_discrete  # noqa: E402
+from pgg_utils.arguments import RUN_ONLY_ARGS  # noqa: E402
 
 
 
@@ -103,7 +102,7 @@ CLEANRL_STEPS = {"discrete": 500_000, "continuous": 1_000_000}
 ALPHA = 0.05
 # Run arguments that do not change what is trained (or only its bits), and the seed: never part of a
 # configuration. The training scripts name the former.
-NOT_CONFIG_ARGS = ppo_pgg_discrete.RUN_ONLY_ARGS | ppo_pgg_continuous.RUN_ONLY_ARGS | {"seed"}
+NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 MARKERS = "osD^vPX*hp<>"
 
 

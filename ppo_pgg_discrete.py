@@ -11,27 +11,16 @@ policy
 With --guidance 1 --cond-dropout 0 this script runs CleanRL's PPO algorithm with CleanRL's defaults;
 what differs from CleanRL's `ppo.py` (iterations rounded up, other random streams, fused Adam,
 numpy rollouts) is listed, one line each, in the README's "What differs from CleanRL", and the
-learning curves are compared with CleanRL's own script in `benchmarks/compare_cleanrl.py`.
-Lines that PGG adds to PPO are marked `# PGG`.
+learning curves are compared with CleanRL's own script in `benchmarks/compare_cleanrl.py`. Lines
+that differ from PPO are marked `# PGG`. Run management (run directories, checkpoints, resume,
+progress) is in `pgg_utils.runs`.
 
     python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1
     python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1 --resume   # continue a stopped run
 """
 
-import fcntl
-import importlib.metadata
-import importlib.util
-import json
-import math
-import os
-import platform
-import random
-import shutil
-import sys
-import time
-import warnings
-from collections import defaultdict, deque
-from dataclasses import asdict, dataclass
+from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -39,44 +28,14 @@ import numpy as np
 import torch
 import torch.nn as nn
 import tyro
-from torch.utils.tensorboard import SummaryWriter
 
-# 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
-CHECKPOINT_FORMAT_VERSION = 2
-READABLE_FORMAT_VERSIONS = (1, 2)
-MAX_GUIDANCE = 1000.0
+from pgg_utils import runs
+from pgg_utils.arguments import RunArgs
+from pgg_utils.fast import flatten_parameters, numpy_forward, numpy_layers
 
 
 @dataclass
-class Args:
-    exp_name: str = "ppo_pgg"
-    """the name of this experiment, part of the run directory's name"""
-    seed: int = 1
-    """seed of the experiment (torch, numpy, random and the environments)"""
-    torch_deterministic: bool = True
-    """if toggled, `torch.use_deterministic_algorithms(True)`"""
-    torch_threads: int = 1
-    """torch intra-op threads; one thread is fastest for these small networks"""
-    compile: bool = False
-    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): updates ~1.6x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm, rounded differently (README, Performance)"""
-    track: bool = False
-    """if toggled, track the run with Weights and Biases (needs `pip install wandb`)"""
-    wandb_project_name: str = "pgg"
-    """the W&B project name"""
-    wandb_entity: str | None = None
-    """the W&B entity (team)"""
-    output_dir: str = "runs"
-    """directory under which the run directory is created"""
-    run_name: str | None = None
-    """run directory name; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
-    resume: bool = False
-    """continue the run in the run directory from its last checkpoint (start it if it has none)"""
-    overwrite: bool = False
-    """replace a run directory that holds checkpoints of a finished run or of other arguments"""
-    capture_video: bool = False
-    """record videos of the first sub-env's episodes into `{run_dir}/videos` (needs the [video] extra)"""
-
-    # Algorithm arguments (CleanRL's discrete PPO defaults)
+class Args(RunArgs):
     env_id: str = "CartPole-v1"
     """the id of a gymnasium environment with a Discrete action space"""
     total_timesteps: int = 500_000
@@ -110,94 +69,13 @@ class Args:
     max_grad_norm: float = 0.5
     """the maximum norm for gradient clipping"""
     target_kl: float | None = None
-    """stop the epochs early when the approximate KL exceeds this"""
-
-    # PGG arguments
-    guidance: float = 1.0
+    """stop the epochs early when the approximate KL (of the rows not dropped) exceeds this"""
+    guidance: float = 1.0  # PGG
     """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""
-    cond_dropout: float = 0.0
+    cond_dropout: float = 0.0  # PGG
     """probability that a sample's actor input is replaced by the null embedding during updates"""
     checkpoint_interval: int = 100_000
     """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
-
-
-# Arguments that change where and how a run is recorded or how fast it runs, never what it learns
-# (--compile, the thread count and deterministic kernels change float rounding only). The sweep keys
-# a training configuration on all the other arguments except the seed.
-RUN_ONLY_ARGS = frozenset({
-    "exp_name", "torch_deterministic", "torch_threads", "compile", "track", "wandb_project_name",
-    "wandb_entity", "output_dir", "run_name", "resume", "overwrite", "capture_video", "checkpoint_interval",
-})  # fmt: skip
-
-
-def guidance_error(value: float, flag: str = "--guidance") -> str | None:
-    """The one rule for a guidance strength, in training and in the sweep's --gammas."""
-    if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
-        return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
-    return None
-
-
-def check_args(args: Args) -> str | None:
-    """Returns a one-line description of what is wrong with `args`, or None. Touches no file."""
-    rules = {  # NaN fails every comparison
-        "learning_rate": (lambda v: 0 < v < math.inf, "a finite number > 0"),
-        "discount": (lambda v: 0 <= v <= 1, "in [0, 1]"),
-        "gae_lambda": (lambda v: 0 <= v <= 1, "in [0, 1]"),
-        "clip_coef": (lambda v: 0 < v < math.inf, "a finite number > 0"),
-        "ent_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
-        "vf_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
-        "max_grad_norm": (lambda v: 0 < v < math.inf, "a finite number > 0"),
-        "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
-        "cond_dropout": (lambda v: 0 <= v <= 1, "in [0, 1]"),
-        "total_timesteps": (lambda v: v > 0, "positive"),
-        "num_envs": (lambda v: v > 0, "positive"),
-        "num_steps": (lambda v: v > 0, "positive"),
-        "update_epochs": (lambda v: v > 0, "positive"),
-        "torch_threads": (lambda v: v > 0, "positive"),
-    }
-    for name, (holds, requirement) in rules.items():
-        if not holds(getattr(args, name)):
-            return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
-    if error := guidance_error(args.guidance):
-        return error
-    batch_size = args.num_envs * args.num_steps
-    if args.num_minibatches <= 0 or batch_size % args.num_minibatches:
-        return f"--num-minibatches must divide num_envs * num_steps = {batch_size}"
-    if args.checkpoint_interval < batch_size:
-        return f"--checkpoint-interval must be at least one batch, num_envs * num_steps = {batch_size}"
-    if args.resume and args.overwrite:
-        return "--resume and --overwrite exclude each other"
-    if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
-        return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
-    if args.track and importlib.util.find_spec("wandb") is None:
-        return "--track needs Weights and Biases: pip install wandb"
-    try:
-        env = gym.make(args.env_id, render_mode="rgb_array" if args.capture_video else None)
-    except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
-        return f"cannot make environment {args.env_id!r}: {e}"
-    action_space = env.action_space
-    error = video_error(env) if args.capture_video else None
-    env.close()
-    if not isinstance(action_space, gym.spaces.Discrete):
-        return f"{args.env_id} has a {type(action_space).__name__} action space; this script needs Discrete (use ppo_pgg_continuous.py)"
-    return error
-
-
-def video_error(env: gym.Env) -> str | None:
-    """Why this env cannot be recorded here (a missing package or rendering backend), or None."""
-    try:
-        import moviepy  # noqa: F401  (gymnasium's RecordVideo writes with it)
-
-        env.reset(seed=0)
-        with warnings.catch_warnings():  # a failing GL backend warns before it raises
-            warnings.simplefilter("ignore")
-            if env.render() is None:
-                return f"{env.spec.id} renders no frames"
-    except ImportError as e:
-        return f"--capture-video needs the [video] extra (pip install -e '.[video]'): {e}"
-    except Exception as e:  # rendering backends fail with anything from OpenGL, pygame or MuJoCo
-        return f"--capture-video cannot render {env.spec.id} here ({type(e).__name__}: {e})"
-    return None
 
 
 def make_env(env_id: str, video_dir: Path | None = None):
@@ -213,9 +91,9 @@ def make_env(env_id: str, video_dir: Path | None = None):
 def make_vector_env(env_id: str, num_envs: int, seed: int, video_dir: Path | None = None) -> gym.vector.VectorEnv:
     """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE
     below relies on): the observation returned with done=True is the next episode's first one.
-    Episode statistics are recorded per sub-env, as in CleanRL: gymnasium 1.4's vector wrapper for
-    them cost ~1.5 µs more per env step, about 2% of training here. With `video_dir`, the first
-    sub-env's episodes are recorded there (on CleanRL's schedule: episodes 0, 1, 8, 27, ..., 1000, 2000, ...)."""
+    Episode statistics are recorded per sub-env, as in CleanRL, cheaper than gymnasium 1.4's vector
+    wrapper. With `video_dir`, the first sub-env's episodes are recorded there (on CleanRL's
+    schedule: episodes 0, 1, 8, 27, ..., 1000, 2000, ...)."""
     envs = gym.vector.SyncVectorEnv(
         [
             lambda i=i: gym.wrappers.RecordEpisodeStatistics(make_env(env_id, video_dir if i == 0 else None)())
@@ -225,50 +103,6 @@ def make_vector_env(env_id: str, num_envs: int, seed: int, video_dir: Path | Non
     )
     envs.action_space.seed(seed)
     return envs
-
-
-# What a sub-env carries from one step to the next, besides its RNG: wrapper counters (time limit,
-# episode statistics) and a classic-control task's physical state. Saved with a checkpoint so that a
-# resumed run continues the very episodes it was in.
-ENV_STATE_ATTRIBUTES = ("_elapsed_steps", "_has_reset", "episode_returns", "episode_lengths", "state", "steps_beyond_terminated")
-
-
-def wrapper_chain(env: gym.Env):
-    while True:
-        yield env
-        if not isinstance(env, gym.Wrapper):
-            return
-        env = env.env
-
-
-def pickle_free(value):
-    """`value` as a checkpoint can hold it: arrays as tensors, numpy scalars as Python numbers."""
-    if isinstance(value, np.ndarray):
-        return torch.from_numpy(value.copy())
-    return value.item() if isinstance(value, np.generic) else value
-
-
-def env_state(envs) -> list[dict]:
-    """The state of every sub-env as plain values and tensors (pickle-free): its wrappers' counters and
-    statistics, its RNG and, where it is a classic-control task, the task's own state ("complete";
-    for other tasks a resumed run starts fresh episodes)."""
-    states = []
-    for env in envs.envs:
-        layers = [
-            {name: pickle_free(value) for name, value in vars(layer).items() if name in ENV_STATE_ATTRIBUTES}
-            for layer in wrapper_chain(env)
-        ]
-        complete = hasattr(env.unwrapped, "state")
-        states.append({"layers": layers, "rng": env.unwrapped.np_random.bit_generator.state, "complete": complete})
-    return states
-
-
-def restore_env_state(envs, states: list[dict]) -> None:
-    for env, state in zip(envs.envs, states):
-        for layer, saved in zip(wrapper_chain(env), state["layers"]):
-            for name, value in saved.items():
-                setattr(layer, name, value.numpy().copy() if isinstance(value, torch.Tensor) else value)
-        env.unwrapped.np_random.bit_generator.state = state["rng"]
 
 
 def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
@@ -294,55 +128,40 @@ class Agent(nn.Module):
             nn.Tanh(),
             layer_init(nn.Linear(64, n_actions), std=0.01),
         )
-        # PGG: the null embedding, an observation-shaped input that means "no state". Initialised to
-        # zeros: that draws nothing from the RNG, so with the same seed every other weight is
-        # initialised exactly as in vanilla PPO; and 0 is a neutral point of the input space.
-        self.null_obs = nn.Parameter(torch.zeros(obs_dim))
+        # The null embedding, an observation-shaped input that means "no state". Zeros draw nothing
+        # from the RNG, so with the same seed every other weight is initialised exactly as in PPO;
+        # and 0 is a neutral point of the input space.
+        self.null_obs = nn.Parameter(torch.zeros(obs_dim))  # PGG
 
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
 
-    def unconditional_logits(self) -> torch.Tensor:
-        """PGG: logits of pi(.|null), shape (n_actions,); one actor pass whatever the batch size."""
-        return self.actor(self.null_obs.unsqueeze(0))[0]
+    def unconditional_logits(self) -> torch.Tensor:  # PGG
+        """Logits of pi(.|null), shape (n_actions,); one actor pass whatever the batch size."""
+        return self.actor(self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_logits(
-        self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None
-    ) -> torch.Tensor:
+    def guided_logits(self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None) -> torch.Tensor:  # PGG
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
         replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
-        if guidance == 1.0 and drop_mask is None:
-            # pi_hat = pi exactly, from PPO's own actor pass: an extra null row could change how the
-            # product is blocked, hence its rounding. The null embedding gets no gradient (and train
-            # leaves it out of the optimizer).
-            return self.actor(obs)
-        # PGG: the null embedding rides along as one extra row of the same actor pass; a separate
-        # one-row pass costs as much as the whole batch at this network size. (Its value can differ
-        # from `unconditional_logits()`, a one-row product, in the last float bit.)
-        logits_cond, logits_null = self.actor(torch.cat([obs, self.null_obs.unsqueeze(0)])).split([len(obs), 1])
+        # pi_hat = pi exactly at γ = 1: PPO's own actor pass, as an extra null row could change how
+        # the product is blocked, hence its rounding; the null embedding then gets no gradient.
+        if guidance == 1.0 and drop_mask is None:  # PGG
+            return self.actor(obs)  # PGG
+        # The null embedding rides along as one extra row of the same actor pass: a separate one-row
+        # pass costs as much as the whole batch at this size (and can round differently from it).
+        logits_cond, logits_null = self.actor(torch.cat([obs, self.null_obs.unsqueeze(0)])).split([len(obs), 1])  # PGG
         if drop_mask is not None:  # PGG
-            logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)
-        # PGG: guide() in one op, null + γ·(cond - null) (equal up to the last float bit): its three
-        # ops and their backward had cost a tenth of the actor's forward and backward.
-        return torch.lerp(logits_null, logits_cond, guidance)
+            logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)  # PGG
+        return guide(logits_cond, logits_null, guidance)  # PGG
 
 
-def guide(cond, null, guidance: float):
-    """PGG: (1-γ)·null + γ·cond, for torch tensors or numpy arrays; exactly `cond` at γ=1."""
-    return (1.0 - guidance) * null + guidance * cond
-
-
-def numpy_layers(mlp: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(weight transposed, bias) of each Linear layer, as numpy views of the parameters."""
-    return [(layer.weight.detach().numpy().T, layer.bias.detach().numpy()) for layer in mlp if isinstance(layer, nn.Linear)]
-
-
-def numpy_forward(layers, x: np.ndarray) -> np.ndarray:
-    """The Agent's Linear-Tanh-...-Linear networks, in numpy."""
-    for weight, bias in layers[:-1]:
-        x = np.tanh(x @ weight + bias)
-    weight, bias = layers[-1]
-    return x @ weight + bias
+def guide(cond, null, guidance: float):  # PGG
+    """The guided branch (1-γ)·null + γ·cond. For numpy arrays (rollouts) that formula; for torch
+    tensors (updates) torch.lerp(null, cond, γ), one op in place of three with their backward, which
+    computes the same mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit)."""
+    if isinstance(cond, torch.Tensor):  # PGG
+        return torch.lerp(null, cond, guidance)  # PGG
+    return (1.0 - guidance) * null + guidance * cond  # PGG
 
 
 def gumbel_noise(*shape: int) -> np.ndarray:
@@ -352,24 +171,26 @@ def gumbel_noise(*shape: int) -> np.ndarray:
     return -np.log(-np.log(uniform.numpy()))
 
 
-class RolloutPolicy:
-    """pi_hat and the critic for acting during one rollout, in numpy, on views of the agent's weights
-    (they are fixed until the update). On a batch of a few observations every torch call pays
-    microseconds of dispatch, an nn.Sequential pass ~35 µs, and these made up most of a rollout step;
-    the same float32 arithmetic in numpy made training ~1.3x faster (README, Performance). The values
-    agree with the Agent's to float rounding (tests/test_equivalence.py). It caches pi(.|null):
-    build one per rollout."""
+# --- the behaviour policy, in numpy --------------------------------------------------------------
+# On a batch of a few observations every torch call pays microseconds of dispatch, and these made up
+# most of a rollout step: acting in numpy, with the same float32 arithmetic on views of the agent's
+# weights, made training ~1.3x faster (benchmarks/README.md; agreement: tests/test_equivalence.py).
 
-    def __init__(self, agent: Agent, guidance: float):
+
+class RolloutPolicy:
+    """pi_hat and the critic for acting during one rollout, on views of the agent's weights (they are
+    fixed until the update). It caches pi(.|null): build one per rollout."""
+
+    def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_layers(agent.actor), numpy_layers(agent.critic)
-        self.guidance = guidance
-        with torch.no_grad():
-            self.logits_null = agent.unconditional_logits().numpy()  # PGG: pi(.|null) is fixed here too
+        self.guidance = guidance  # PGG
+        with torch.no_grad():  # PGG
+            self.logits_null = agent.unconditional_logits().numpy()  # PGG
 
     def act(self, obs: np.ndarray, gumbel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs`. Actions are sampled by the
         Gumbel-max trick with `gumbel`, standard Gumbel noise shaped like the logits."""
-        logits = guide(numpy_forward(self.actor, obs), self.logits_null, self.guidance)  # PGG: act with pi_hat
+        logits = guide(numpy_forward(self.actor, obs), self.logits_null, self.guidance)  # PGG
         actions = (logits + gumbel).argmax(-1)
         shifted = logits - logits.max(-1, keepdims=True)
         # The log-softmax of the sampled actions only: a third of the cost of the full one.
@@ -378,6 +199,9 @@ class RolloutPolicy:
 
     def value(self, obs: np.ndarray) -> np.ndarray:
         return numpy_forward(self.critic, obs)[:, 0]
+
+
+# --- rollout, GAE, loss, update ------------------------------------------------------------------
 
 
 @dataclass
@@ -448,23 +272,6 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
-def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
-    """Moves `params` into one flat buffer and their gradients into another, and returns a Parameter
-    over the two for the optimizer and gradient clipping. On the CPU, Adam and clip_grad_norm_ loop
-    over their tensors in Python: for this agent's 13 small ones that was ~300 µs per minibatch, about a
-    tenth of the update; on one tensor it is ~40 µs. The parameters become views of the buffers: the forward
-    pass, autograd and the state dict are unchanged, and backward accumulates into the flat gradient
-    (zero it in place, never set it to None)."""
-    flat = nn.Parameter(torch.cat([p.detach().reshape(-1) for p in params]))
-    flat.grad = torch.zeros_like(flat)
-    offset = 0
-    for p in params:
-        p.data = flat.data[offset : offset + p.numel()].view_as(p)
-        p.grad = flat.grad[offset : offset + p.numel()].view_as(p)
-        offset += p.numel()
-    return flat
-
-
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. Returns (loss, stats); the stats are detached tensors, not floats, so that the
@@ -478,26 +285,26 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     ratio = logratio.exp()
 
     with torch.no_grad():
-        # PGG: a dropped row compares pi(a|null) with the pi_hat(a|s) that acted, so its ratio does not
-        # start at 1; the KL estimates and the clip fraction describe the policy's own change, i.e. the
-        # kept rows. Masked means, not boolean indexing: the compiled loss keeps static shapes.
-        kept = torch.ones_like(ratio) if drop_mask is None else (~drop_mask).float()
-        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # noqa: E731
+        # A dropped row compares pi(a|null) with the pi_hat(a|s) that acted, so its ratio does not
+        # start at 1: the KL estimates and the clip fraction describe the kept rows, the policy's own
+        # change. Masked means, not boolean indexing: the compiled loss keeps static shapes.
+        kept = torch.ones_like(ratio) if drop_mask is None else (~drop_mask).float()  # PGG
+        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # noqa: E731  # PGG
         # http://joschu.net/blog/kl-approx.html
-        old_approx_kl = kept_mean(-logratio)
-        approx_kl = kept_mean((ratio - 1) - logratio)
+        old_approx_kl = kept_mean(-logratio)  # PGG
+        approx_kl = kept_mean((ratio - 1) - logratio)  # PGG
         clipped = ((ratio - 1.0).abs() > args.clip_coef).float()
-        clipfrac = kept_mean(clipped)
-        dropped_stats = {}
+        clipfrac = kept_mean(clipped)  # PGG
+        dropped_stats = {}  # PGG
         if drop_mask is not None:  # PGG
-            dropped = 1.0 - kept
-            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # noqa: E731
-            dropped_stats = {
-                "pgg/dropped_fraction": dropped.mean(),
-                "pgg/dropped_ratio_mean": dropped_mean(ratio),
-                "pgg/dropped_abs_logratio": dropped_mean(logratio.abs()),
-                "pgg/dropped_clipfrac": dropped_mean(clipped),
-            }
+            dropped = 1.0 - kept  # PGG
+            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # noqa: E731  # PGG
+            dropped_stats = {  # PGG
+                "pgg/dropped_fraction": dropped.mean(),  # PGG
+                "pgg/dropped_ratio_mean": dropped_mean(ratio),  # PGG
+                "pgg/dropped_abs_logratio": dropped_mean(logratio.abs()),  # PGG
+                "pgg/dropped_clipfrac": dropped_mean(clipped),  # PGG
+            }  # PGG
 
     mb_advantages = batch["advantages"][mb_inds]
     if args.norm_adv:
@@ -526,7 +333,7 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
         "losses/old_approx_kl": old_approx_kl,
         "losses/approx_kl": approx_kl,
         "losses/clipfrac": clipfrac,
-        **dropped_stats,
+        **dropped_stats,  # PGG
     }
 
 
@@ -547,11 +354,11 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, 
     for _ in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
-            drop_mask = None
-            if args.cond_dropout > 0:  # PGG: conditioning dropout
-                drop_mask = torch.rand(minibatch_size) < args.cond_dropout
-            loss, stats = loss_fn(agent, batch, b_inds[start : start + minibatch_size], drop_mask, args)
-            for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):
+            drop_mask = None  # PGG
+            if args.cond_dropout > 0:  # PGG
+                drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
+            loss, stats = loss_fn(agent, batch, b_inds[start : start + minibatch_size], drop_mask, args)  # PGG
+            for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
             optimizer.zero_grad(set_to_none=False)  # in place: see flatten_parameters
@@ -559,7 +366,7 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, 
             nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], args.max_grad_norm)
             optimizer.step()
 
-        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:
+        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:  # PGG: the kept rows' KL
             break
 
     y_pred, y_true = batch["values"].numpy(), batch["returns"].numpy()
@@ -570,364 +377,108 @@ def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, 
     return stats
 
 
-@torch.no_grad()
-def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:
-    """PGG: how far guidance moves the policy, and what the unconditional branch has learned."""
-    logp_guided = agent.guided_logits(obs, guidance).log_softmax(-1)
-    logp_cond = agent.actor(obs).log_softmax(-1)
-    logp_null = agent.unconditional_logits().log_softmax(-1)
-    return {
-        "pgg/kl_guided_vs_conditional": (logp_guided.exp() * (logp_guided - logp_cond)).sum(-1).mean().item(),
-        "pgg/entropy_unconditional": -(logp_null.exp() * logp_null).sum().item(),
-        "pgg/null_embedding_norm": agent.null_obs.norm().item(),
-    }
+@torch.no_grad()  # PGG
+def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:  # PGG
+    """How far guidance moves the policy, and what the unconditional branch has learned."""
+    logp_guided = agent.guided_logits(obs, guidance).log_softmax(-1)  # PGG
+    logp_cond = agent.actor(obs).log_softmax(-1)  # PGG
+    logp_null = agent.unconditional_logits().log_softmax(-1)  # PGG
+    return {  # PGG
+        "pgg/kl_guided_vs_conditional": (logp_guided.exp() * (logp_guided - logp_cond)).sum(-1).mean().item(),  # PGG
+        "pgg/entropy_unconditional": -(logp_null.exp() * logp_null).sum().item(),  # PGG
+        "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
+    }  # PGG
 
 
-def checkpoint_marks(total_timesteps: int, interval: int, batch_size: int) -> list[int]:
-    """Nominal steps that get a checkpoint: every multiple of `interval` below the total, and the total;
-    one per iteration (interval >= batch_size), so a multiple that the last iteration passes is left
-    to the total's checkpoint."""
-    last_iteration = -(-total_timesteps // batch_size)
-    return [m for m in range(interval, total_timesteps, interval) if -(-m // batch_size) < last_iteration] + [total_timesteps]
+# --- training ------------------------------------------------------------------------------------
 
 
-def checkpoint_path(run_dir: Path, mark: int) -> Path:
-    return run_dir / "checkpoints" / f"step_{mark:09d}.pt"
+def train(args: Args, run: runs.Run) -> None:
+    """Trains one agent, writing TensorBoard events and checkpoints into `run.dir`. With --resume it
+    continues from the last checkpoint bit for bit: the checkpoint holds the optimizer, the sub-envs
+    mid-episode, the next observation and every RNG state."""
+    resumed = run.checkpoint_to_resume()
+    writer = run.open_writer(resumed)
+    runs.seed_everything(args)
 
-
-def package_versions() -> dict[str, str | None]:
-    """The software stack a checkpoint was trained on (the sweep keeps MuJoCo versions apart)."""
-
-    def version(package: str) -> str | None:
-        try:
-            return importlib.metadata.version(package)
-        except importlib.metadata.PackageNotFoundError:
-            return None
-
-    return {"python": platform.python_version(), **{p: version(p) for p in ("torch", "numpy", "gymnasium", "mujoco")}}
-
-
-def rng_state() -> dict:
-    """torch's, numpy's and Python's global generators, pickle-free."""
-    numpy_state = np.random.get_state(legacy=False)
-    numpy_state["state"]["key"] = torch.from_numpy(numpy_state["state"]["key"].astype(np.int64))
-    return {"torch": torch.get_rng_state(), "numpy": numpy_state, "python": random.getstate()}
-
-
-def set_rng_state(state: dict) -> None:
-    torch.set_rng_state(state["torch"])
-    numpy_state = state["numpy"]
-    numpy_state["state"]["key"] = numpy_state["state"]["key"].numpy().astype(np.uint32)
-    np.random.set_state(numpy_state)
-    random.setstate(state["python"])
-
-
-def save_checkpoint(path: Path, agent: Agent, args: Args, global_step: int, mark: int, envs, resume: dict) -> None:
-    """Self-contained, pickle-free checkpoint (loads with weights_only=True), written atomically.
-    `resume` holds what continuing the run needs besides the model (see `train`)."""
-    payload = {
-        "format_version": CHECKPOINT_FORMAT_VERSION,
-        "script": "ppo_pgg_discrete",
-        "action_space": "discrete",
-        "env_id": args.env_id,
-        "obs_dim": int(envs.single_observation_space.shape[0]),
-        "n_actions": int(envs.single_action_space.n),
-        "global_step": int(global_step),
-        "step_mark": int(mark),
-        "args": asdict(args),
-        "versions": package_versions(),
-        "model": agent.state_dict(),
-        "resume": resume,
-    }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    torch.save(payload, tmp)
-    os.replace(tmp, path)
-
-
-def load_checkpoint(path) -> tuple[Agent, dict]:
-    """Rebuilds the agent from a checkpoint file; returns (agent in eval mode, the checkpoint dict)."""
-    ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    return agent_from_checkpoint(ckpt, path), ckpt
-
-
-def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
-    """The agent, in eval mode, of an already loaded checkpoint dict (of any readable format)."""
-    if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != "discrete":
-        raise ValueError(f"{source} is not a discrete PGG checkpoint of format {READABLE_FORMAT_VERSIONS}")
-    agent = Agent(ckpt["obs_dim"], ckpt["n_actions"])
-    agent.load_state_dict(ckpt["model"])
-    return agent.eval()
-
-
-def default_run_name(args: Args) -> str:
-    return f"{args.env_id}__{args.exp_name}__g{args.guidance:g}__p{args.cond_dropout:g}__s{args.seed}"
-
-
-class RunDirError(Exception):
-    """A run directory this run must not write to; the message is one line that says what to do."""
-
-
-HELD_LOCKS: dict[Path, object] = {}  # run directory -> its open lock file, while this process trains there
-
-
-def lock_directory(directory: Path):
-    """An exclusive lock on `directory` for as long as the returned file stays open. The kernel drops
-    it when its holder dies, however it dies, so no stale lock outlives a killed run."""
-    handle = open(directory / ".lock", "a+")
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        handle.seek(0)
-        holder = handle.read().strip() or "unknown"
-        handle.close()
-        raise RunDirError(f"{directory} is in use by another process (pid {holder}); wait for it or stop it") from None
-    handle.truncate(0)
-    handle.write(f"{os.getpid()}\n")
-    handle.flush()
-    return handle
-
-
-def latest_checkpoint(run_dir: Path) -> Path | None:
-    found = sorted((run_dir / "checkpoints").glob("step_*.pt"))
-    return found[-1] if found else None
-
-
-def training_arguments(values: dict) -> dict:
-    """The arguments that decide what a run learns, those an older checkpoint lacks at their defaults."""
-    defaults = asdict(Args())
-    return {name: values.get(name, default) for name, default in defaults.items() if name not in RUN_ONLY_ARGS}
-
-
-def check_continuable(run_dir: Path, latest: Path, args: Args) -> None:
-    """Raises RunDirError unless this run may continue the one whose last checkpoint is `latest`."""
-    try:
-        ckpt = torch.load(latest, map_location="cpu", weights_only=True)
-    except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
-        raise RunDirError(f"cannot read {latest} ({type(e).__name__}); pass --overwrite to start over") from None
-    recorded, wanted = training_arguments(ckpt.get("args", {})), training_arguments(asdict(args))
-    differing = [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
-    if differing:
-        raise RunDirError(
-            f"{run_dir} holds a run with other arguments ({', '.join(differing)}): "
-            "choose another --run-name, or pass --overwrite to replace it"
-        )
-    if not args.resume:
-        finished = checkpoint_path(run_dir, args.total_timesteps).exists()
-        state = "a finished run" if finished else f"an unfinished run (last checkpoint {latest.name})"
-        how = "" if finished else "pass --resume to continue it, or "
-        raise RunDirError(f"{run_dir} holds {state}: {how}pass --overwrite to train it again from scratch")
-    if "resume" not in ckpt:
-        raise RunDirError(f"{latest} predates resumable checkpoints: pass --overwrite to start over")
-
-
-def prepare_run_dir(args: Args) -> Path:
-    """Creates and locks the run directory and writes args.json. A directory that holds checkpoints is
-    only continued (--resume, same training arguments) or replaced (--overwrite), and every check runs
-    before anything is deleted. Raises RunDirError (one line) or OSError (not writable)."""
-    run_dir = Path(args.output_dir) / (args.run_name or default_run_name(args))
-    run_dir.mkdir(parents=True, exist_ok=True)
-    if run_dir.resolve() not in HELD_LOCKS:
-        HELD_LOCKS[run_dir.resolve()] = lock_directory(run_dir)
-    latest = latest_checkpoint(run_dir)
-    if latest is not None and not args.overwrite:
-        try:
-            check_continuable(run_dir, latest, args)
-        except RunDirError:
-            HELD_LOCKS.pop(run_dir.resolve()).close()
-            raise
-    if not (args.resume and latest is not None):
-        for stale in ("checkpoints", "videos"):
-            shutil.rmtree(run_dir / stale, ignore_errors=True)
-        for stale in run_dir.glob("events.out.tfevents.*"):
-            stale.unlink()
-    tmp = run_dir / "args.json.tmp"
-    tmp.write_text(json.dumps(asdict(args), indent=2))
-    os.replace(tmp, run_dir / "args.json")
-    return run_dir
-
-
-class ProgressReport:
-    """Steps done, SPS, recent mean return and ETA: a live bar (rich) when stdout is a terminal, else
-    a plain line every `interval` seconds, for the logs of the launcher and of Slurm."""
-
-    def __init__(self, total_steps: int, first_step: int, interval: float = 30.0):
-        self.total, self.first_step, self.interval = total_steps, first_step, interval
-        self.start = self.last_line = time.time()
-        self.bar = None
-        if sys.stdout.isatty():
-            from rich.progress import BarColumn, Progress, TaskProgressColumn, TextColumn
-
-            self.bar = Progress(TextColumn("training"), BarColumn(), TaskProgressColumn(), TextColumn("{task.fields[line]}"))
-            self.task = self.bar.add_task("", total=total_steps, completed=first_step, line="")
-            self.bar.start()
-
-    def update(self, global_step: int, recent_returns) -> int:
-        """Reports `global_step`; returns the SPS of this process so far."""
-        now = time.time()
-        sps = int((global_step - self.first_step) / max(now - self.start, 1e-9))
-        mean_return = f"{np.mean(recent_returns):.1f}" if recent_returns else "-"
-        eta = (self.total - global_step) / max(sps, 1)
-        line = f"{global_step:,}/{self.total:,} steps  {sps:,} SPS  return(last 20) {mean_return}  ETA {eta / 60:.0f}m{eta % 60:02.0f}s"
-        if self.bar is not None:
-            self.bar.update(self.task, completed=global_step, line=line)
-        elif now - self.last_line >= self.interval:
-            self.last_line = now
-            print(line, flush=True)
-        return sps
-
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.stop()
-
-
-def train(args: Args, run_dir: Path) -> None:
-    """Trains one agent, writing TensorBoard events and checkpoints into `run_dir` (prepared by
-    `prepare_run_dir`). With --resume it continues from the last checkpoint bit for bit: the checkpoint
-    holds the optimizer, the sub-envs mid-episode, the next observation and every RNG state."""
-    try:
-        _train(args, run_dir, latest_checkpoint(run_dir) if args.resume else None)
-    finally:
-        lock = HELD_LOCKS.pop(run_dir.resolve(), None)
-        if lock is not None:
-            lock.close()
-
-
-def _train(args: Args, run_dir: Path, resume_from: Path | None) -> None:
-    resumed = torch.load(resume_from, map_location="cpu", weights_only=True) if resume_from else None
-    if args.track:
-        import wandb
-
-        wandb.init(
-            project=args.wandb_project_name,
-            entity=args.wandb_entity,
-            sync_tensorboard=True,
-            config=asdict(args),
-            name=run_dir.name,
-            save_code=True,
-        )
-    # Events written after the checkpoint by the run that stopped are dropped by TensorBoard's readers.
-    writer = SummaryWriter(str(run_dir), purge_step=resumed["global_step"] + 1 if resumed else None)
-    writer.add_text(
-        "hyperparameters",
-        "|param|value|\n|-|-|\n%s" % "\n".join(f"|{key}|{value}|" for key, value in asdict(args).items()),
-    )
-
-    random.seed(args.seed)
-    np.random.seed(args.seed)
-    torch.manual_seed(args.seed)
-    torch.backends.cudnn.deterministic = args.torch_deterministic
-    torch.use_deterministic_algorithms(args.torch_deterministic)
-    torch.set_num_threads(args.torch_threads)
-
-    # A resumed run records into a folder of its own: RecordVideo numbers episodes from 0 again.
-    video_dir = run_dir / "videos" / (f"from_step_{resumed['global_step']}" if resumed else "")
-    envs = make_vector_env(args.env_id, args.num_envs, args.seed, video_dir if args.capture_video else None)
+    envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
     obs_dim = envs.single_observation_space.shape[0]
     agent = Agent(obs_dim, envs.single_action_space.n)
-    # fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
-    # PGG: at γ = 1 without dropout the null embedding is outside the objective. Its all-zero gradient
-    # in the flat buffer would still change the clipping norm's rounding; without it the run is
-    # bit-for-bit PPO.
-    vanilla = args.guidance == 1.0 and args.cond_dropout == 0
-    trained = [p for name, p in agent.named_parameters() if not (vanilla and name == "null_obs")]
+    # At γ = 1 without dropout the null embedding is outside the objective: its all-zero gradient in
+    # the flat buffer would still change the clipping norm's rounding; without it the run is PPO's bits.
+    vanilla = args.guidance == 1.0 and args.cond_dropout == 0  # PGG
+    trained = [p for name, p in agent.named_parameters() if not (vanilla and name == "null_obs")]  # PGG
+    # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
-    # One fused kernel for the loss and one for its backward, in place of ~200 small ops whose
-    # per-call dispatch dominates an update of this size on the CPU.
+    # One fused kernel for the loss and one for its backward, in place of ~200 small ops.
     loss_fn = torch.compile(minibatch_loss) if args.compile else minibatch_loss
 
     batch_size = args.num_envs * args.num_steps
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim)
-    recent_returns = deque(maxlen=20)
-
-    def on_episode(episodic_return: float, episodic_length: int, step: int):
-        recent_returns.append(episodic_return)
-        writer.add_scalar("charts/episodic_return", episodic_return, step)
-        writer.add_scalar("charts/episodic_length", episodic_length, step)
 
     obs, _ = envs.reset(seed=args.seed)
     next_obs = obs.astype(np.float32)
     next_done = np.zeros(args.num_envs, dtype=np.float32)
     first_iteration, global_step = 1, 0
     if resumed is not None:
-        state = resumed["resume"]
         agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
-        optimizer.load_state_dict(state["optimizer"])
-        restore_env_state(envs, state["envs"])
-        if all(sub_env["complete"] for sub_env in state["envs"]):
-            next_obs, next_done = state["next_obs"].numpy().copy(), state["next_done"].numpy().copy()
-        else:  # a task whose own state a checkpoint cannot hold: fresh episodes, a statistically equal run
-            obs, _ = envs.reset(seed=args.seed + state["iteration"])
-            next_obs = obs.astype(np.float32)
-        set_rng_state(state["rng"])
-        first_iteration, global_step = state["iteration"] + 1, resumed["global_step"]
-        print(f"resuming from {resume_from} at global_step={global_step}", flush=True)
-    marks = deque(m for m in checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size) if m > global_step)
-    progress = ProgressReport(num_iterations * batch_size, global_step)
+        optimizer.load_state_dict(resumed["resume"]["optimizer"])
+        first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
+        if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
+            obs, _ = envs.reset(seed=args.seed + first_iteration - 1)
+            next_obs, next_done = obs.astype(np.float32), np.zeros(args.num_envs, dtype=np.float32)
+    marks = run.start_progress(num_iterations * batch_size, global_step, runs.checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size))
 
     try:
         for iteration in range(first_iteration, num_iterations + 1):
             if args.anneal_lr:
                 optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
 
-            policy = RolloutPolicy(agent, args.guidance)
-            next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, on_episode, global_step)
+            policy = RolloutPolicy(agent, args.guidance)  # PGG
+            next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, run.on_episode, global_step)
             global_step += batch_size
             next_value = policy.value(next_obs)
             advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
-            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))
+            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))  # PGG
             stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
-            stats["charts/SPS"] = sps = progress.update(global_step, recent_returns)
+            stats["charts/SPS"] = run.report(global_step, iteration, stats, optimizer.param_groups[0]["params"][0])
             for key, value in stats.items():
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                mark = marks.popleft()
-                resume = {
-                    "iteration": iteration,
-                    "optimizer": optimizer.state_dict(),
-                    "envs": env_state(envs),
-                    "next_obs": torch.from_numpy(next_obs.copy()),
-                    "next_done": torch.from_numpy(next_done.copy()),
-                    "rng": rng_state(),
-                }
-                save_checkpoint(checkpoint_path(run_dir, mark), agent, args, global_step, mark, envs, resume)
-                mean_return = np.mean(recent_returns) if recent_returns else float("nan")
-                print(f"global_step={global_step} mark={mark} mean_return(last 20)={mean_return:.1f} SPS={sps}", flush=True)
+                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done)
+                run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
-        progress.close()
         envs.close()
-        writer.close()
-    if args.track:
-        wandb.finish()
+
+
+def checkpoint_shapes(envs) -> dict:
+    """What a checkpoint records of the task's spaces."""
+    return {"obs_dim": int(envs.single_observation_space.shape[0]), "n_actions": int(envs.single_action_space.n)}
+
+
+def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
+    """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
+    if ckpt.get("format_version") not in runs.READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != "discrete":
+        raise ValueError(f"{source} is not a discrete PGG checkpoint of format {runs.READABLE_FORMAT_VERSIONS}")
+    agent = Agent(ckpt["obs_dim"], ckpt["n_actions"])
+    agent.load_state_dict(ckpt["model"])
+    return agent.eval()
+
+
+def load_checkpoint(path) -> tuple[Agent, dict]:
+    """(agent in eval mode, the checkpoint dict) from a checkpoint file."""
+    ckpt = runs.read_checkpoint_file(path)
+    return agent_from_checkpoint(ckpt, path), ckpt
 
 
 def main() -> None:
     args = tyro.cli(Args)
-    error = check_args(args)
-    if error is None:
-        try:
-            run_dir = prepare_run_dir(args)
-        except RunDirError as e:
-            error = str(e)
-        except OSError as e:
-            error = f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
-    if error is not None:
-        print(f"error: {error}", file=sys.stderr)
-        sys.exit(2)
-    print(f"run directory: {run_dir}")
-    try:
-        train(args, run_dir)
-    except (KeyboardInterrupt, OSError) as e:  # Ctrl-C, or e.g. a full disk while saving a checkpoint
-        latest = latest_checkpoint(run_dir)
-        kept = f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
-        what = "interrupted" if isinstance(e, KeyboardInterrupt) else f"error: {e.strerror or e}"
-        print(f"{what}; {run_dir}: {kept}", file=sys.stderr)
-        sys.exit(130 if isinstance(e, KeyboardInterrupt) else 1)
+    runs.launch(args, "discrete", __file__, train)
 
 
 if __name__ == "__main__":

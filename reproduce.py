@@ -38,6 +38,7 @@ import eval_gamma_sweep
 import plot_results
 import ppo_pgg_continuous
 import ppo_pgg_discrete
+from pgg_utils import runs
 
 ROOT = Path(__file__).resolve().parent
 VARIANTS = {"ppo": (1.0, 0.0), "pgg_g1.1": (1.1, 0.0), "pgg_drop0.1": (1.0, 0.1)}
@@ -134,7 +135,7 @@ class RunSpec:
     def final_checkpoint(self) -> Path:
         module = training_module(self.env_id)
         total = self.total_timesteps or module.Args().total_timesteps
-        return module.checkpoint_path(Path(self.root) / self.name, total)
+        return runs.checkpoint_path(Path(self.root) / self.name, total)
 
     @property
     def log(self) -> Path:
@@ -333,7 +334,7 @@ def reproduce(args: Args) -> int:
 def unfinished_note(spec: RunSpec) -> str:
     """`name (last checkpoint's step)`, and who is training it now where its run directory is locked."""
     run_dir = Path(spec.root) / spec.name
-    latest = training_module(spec.env_id).latest_checkpoint(run_dir)
+    latest = runs.latest_checkpoint(run_dir)
     note = f"{spec.name} ({int(latest.stem.split('_')[1]):,}" if latest else f"{spec.name} (no checkpoint"
     lock = run_dir / ".lock"
     if lock.exists():

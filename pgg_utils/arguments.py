@@ -1,0 +1,92 @@
+"""The arguments every training script shares and the rules they obey, once for the scripts, the
+sweep and the launcher. Plain Python: no torch, no gymnasium."""
+
+import math
+from dataclasses import dataclass, fields
+
+MAX_GUIDANCE = 1000.0
+
+
+@dataclass
+class RunArgs:
+    """The arguments every training script has besides its algorithm's: CleanRL's header, and where
+    and how the run is recorded."""
+
+    exp_name: str = "ppo_pgg"
+    """the name of this experiment, part of the run directory's name"""
+    seed: int = 1
+    """seed of the experiment (torch, numpy, random and the environments)"""
+    torch_deterministic: bool = True
+    """if toggled, `torch.use_deterministic_algorithms(True)`"""
+    torch_threads: int = 1
+    """torch intra-op threads; one thread is fastest for these small networks"""
+    compile: bool = False
+    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): updates ~1.6x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm, rounded differently (README, Performance)"""
+    track: bool = False
+    """if toggled, track the run with Weights and Biases (needs `pip install wandb`)"""
+    wandb_project_name: str = "pgg"
+    """the W&B project name"""
+    wandb_entity: str | None = None
+    """the W&B entity (team)"""
+    output_dir: str = "runs"
+    """directory under which the run directory is created"""
+    run_name: str | None = None
+    """run directory name, one path component; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
+    resume: bool = False
+    """continue the run in the run directory from its last readable checkpoint (start it if it has none)"""
+    overwrite: bool = False
+    """replace a run directory that holds checkpoints of a finished run or of other arguments"""
+    capture_video: bool = False
+    """record videos of the first sub-env's episodes into `{run_dir}/videos` (needs the [video] extra and, for MuJoCo, a GL backend: MUJOCO_GL=egl or osmesa)"""
+    checkpoint_interval: int = 100_000
+    """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
+
+
+# Arguments that change where and how a run is recorded or how fast it runs, never what it learns
+# (--compile, the thread count and deterministic kernels change float rounding only).
+RUN_ONLY_ARGS = frozenset(f.name for f in fields(RunArgs)) - {"seed"}
+
+
+def training_arguments(values: dict, defaults: dict) -> dict:
+    """The arguments that decide what a run learns; those an older checkpoint lacks at their defaults."""
+    return {name: values.get(name, default) for name, default in defaults.items() if name not in RUN_ONLY_ARGS}
+
+
+# --- argument rules ------------------------------------------------------------------------------
+
+
+def guidance_error(value: float, flag: str = "--guidance") -> str | None:
+    """The one rule for a guidance strength, in training and in the sweep's --gammas."""
+    if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
+        return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
+    return None
+
+
+def run_name_error(name: str | None) -> str | None:
+    """A run name is one path component: it cannot leave --output-dir or name it."""
+    if name is None:
+        return None
+    if not name or name in (".", "..") or "/" in name or "\\" in name or "\0" in name:
+        return f"--run-name must be one path component (no '/', not '.' or '..'), got {name!r}"
+    return None
+
+
+# name -> (holds, requirement); NaN fails every comparison. Rules of arguments a script lacks are skipped.
+ARGUMENT_RULES = {
+    "learning_rate": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+    "discount": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+    "gae_lambda": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+    "clip_coef": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+    "ent_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
+    "vf_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
+    "max_grad_norm": (lambda v: 0 < v < math.inf, "a finite number > 0"),
+    "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
+    "cond_dropout": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+    "total_timesteps": (lambda v: v > 0, "positive"),
+    "num_envs": (lambda v: v > 0, "positive"),
+    "num_steps": (lambda v: v > 0, "positive"),
+    "update_epochs": (lambda v: v > 0, "positive"),
+    "torch_threads": (lambda v: v > 0, "positive"),
+    "obs_clip": (lambda v: 0 < v <= math.inf, "> 0"),
+    "reward_clip": (lambda v: 0 < v <= math.inf, "> 0"),
+}

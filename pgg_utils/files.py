@@ -1,0 +1,82 @@
+"""Atomic writes, CSVs and directory locks: one of each for every script."""
+
+import csv
+import fcntl
+import io
+import os
+from pathlib import Path
+
+
+class InputError(Exception):
+    """Bad input: reported as one line, exit status 2."""
+
+
+def write_atomic(path: Path, data: bytes | str) -> None:
+    """Writes `data` to `path` through a temporary file beside it, so that `path` holds either its
+    old or its new content, never a part. On failure (a full disk) no temporary file is left and the
+    OSError names `path`."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(tmp, "wb") as f:
+            f.write(data.encode() if isinstance(data, str) else data)
+        os.replace(tmp, path)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise OSError(e.errno, f"cannot write {path}: {e.strerror or e}") from None
+
+
+def csv_text(columns: list[str], rows: list[dict]) -> str:
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=columns, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return text.getvalue()
+
+
+def write_csv_atomic(path: Path, columns: list[str], rows: list[dict]) -> None:
+    write_atomic(path, csv_text(columns, rows))
+
+
+def read_csv(path: Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+class LockedError(Exception):
+    """A directory another process holds; the message says which process."""
+
+
+LOCK_FILE = ".lock"
+
+
+def lock_directory(directory: Path, what: str = "another process"):
+    """An exclusive lock on `directory` (flock on its .lock file, holding the holder's pid) for as long
+    as the returned file stays open. The kernel drops it when its holder dies, however it dies, so no
+    stale lock outlives a killed process. LockedError when another process holds it."""
+    handle = open(Path(directory) / LOCK_FILE, "a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip() or "unknown"
+        handle.close()
+        raise LockedError(f"{directory} is in use by {what} (pid {holder})") from None
+    handle.truncate(0)
+    handle.write(f"{os.getpid()}\n")
+    handle.flush()
+    return handle
+
+
+def lock_holder(directory: Path) -> str | None:
+    """The pid that holds `directory`'s lock now, or None where no process holds it."""
+    path = Path(directory) / LOCK_FILE
+    if not path.exists():
+        return None
+    with open(path) as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except BlockingIOError:
+            return handle.read().strip() or "unknown"
+    return None

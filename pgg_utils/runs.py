@@ -1,0 +1,575 @@
+"""Run management for the training scripts, once: the run arguments and their rules, the run directory
+and its lock, the overwrite and resume rules, the checkpoint format, RNG and env-state capture, and
+`launch`, a script's `main` after parsing."""
+
+import hashlib
+import importlib.metadata
+import importlib.util
+import io
+import json
+import math
+import os
+import platform
+import random
+import shutil
+import subprocess
+import sys
+import warnings
+from collections import deque
+from dataclasses import asdict
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import torch
+
+from pgg_utils.arguments import ARGUMENT_RULES, guidance_error, run_name_error, training_arguments
+from pgg_utils.files import LockedError, lock_directory, write_atomic
+from pgg_utils.progress import Progress
+
+# 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
+CHECKPOINT_FORMAT_VERSION = 2
+READABLE_FORMAT_VERSIONS = (1, 2)
+CHECKPOINT_GLOB = "step_*.pt"
+PACKAGE_DIR = Path(__file__).resolve().parent
+
+
+def argument_error(args, kind: str) -> str | None:
+    """A one-line description of what is wrong with a training script's `args` (`kind`: discrete or
+    continuous, the action space it trains), or None. Makes the env once; touches no file."""
+    for name, (holds, requirement) in ARGUMENT_RULES.items():
+        if hasattr(args, name) and not holds(getattr(args, name)):
+            return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
+    if error := guidance_error(args.guidance) or run_name_error(args.run_name):
+        return error
+    batch_size = args.num_envs * args.num_steps
+    if args.num_minibatches <= 0 or batch_size % args.num_minibatches:
+        return f"--num-minibatches must divide num_envs * num_steps = {batch_size}"
+    if args.norm_adv and batch_size // args.num_minibatches < 2:
+        return (f"minibatches of {batch_size // args.num_minibatches} row cannot normalise advantages (a zero std): "
+                "use fewer --num-minibatches, more --num-steps, or --no-norm-adv")  # fmt: skip
+    if args.checkpoint_interval < batch_size:
+        return f"--checkpoint-interval must be at least one batch, num_envs * num_steps = {batch_size}"
+    if args.cond_dropout == 1 and args.target_kl is not None:
+        return "--target-kl never triggers with --cond-dropout 1 (the KL is measured on kept rows, and none is kept)"
+    if args.resume and args.overwrite:
+        return "--resume and --overwrite exclude each other"
+    if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
+        return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
+    if args.track and importlib.util.find_spec("wandb") is None:
+        return "--track needs Weights and Biases: pip install wandb"
+    return env_error(args.env_id, kind, args.capture_video)
+
+
+def env_error(env_id: str, kind: str, capture_video: bool = False) -> str | None:
+    """Why a training script of `kind` cannot train `env_id` here, or None."""
+    try:
+        env = gym.make(env_id, render_mode="rgb_array" if capture_video else None)
+    except ImportError as e:
+        if env_id == "Pusher-v4":
+            return "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); with a newer mujoco use Pusher-v5"
+        return f"cannot make environment {env_id!r}: {e}"
+    except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
+        return f"cannot make environment {env_id!r}: {e}"
+    action_space, observation_space = env.action_space, env.observation_space
+    error = video_error(env) if capture_video else None
+    env.close()
+    wanted, other = (gym.spaces.Discrete, "continuous") if kind == "discrete" else (gym.spaces.Box, "discrete")
+    if not isinstance(action_space, wanted):
+        return (f"{env_id} has a {type(action_space).__name__} action space; this script needs "
+                f"{wanted.__name__} (use ppo_pgg_{other}.py)")  # fmt: skip
+    if kind == "discrete" and not (isinstance(observation_space, gym.spaces.Box) and len(observation_space.shape) == 1):
+        return f"{env_id} has a {type(observation_space).__name__} observation space; ppo_pgg_discrete.py needs a vector (1-D Box)"
+    return error
+
+
+def video_error(env: gym.Env) -> str | None:
+    """Why this env cannot be recorded here (a missing package or rendering backend), or None."""
+    try:
+        import moviepy  # noqa: F401  (gymnasium's RecordVideo writes with it)
+
+        env.reset(seed=0)
+        with warnings.catch_warnings():  # a failing GL backend warns before it raises
+            warnings.simplefilter("ignore")
+            if env.render() is None:
+                return f"{env.spec.id} renders no frames"
+    except ImportError as e:
+        return f"--capture-video needs the [video] extra (pip install -e '.[video]'): {e}"
+    except Exception as e:  # rendering backends fail with anything from OpenGL, pygame or MuJoCo
+        hint = "; headless MuJoCo needs MUJOCO_GL=egl or osmesa (apt-get install libosmesa6)" if "mujoco" in type(env.unwrapped).__module__ else ""
+        return f"--capture-video cannot render {env.spec.id} here ({type(e).__name__}: {e}){hint}"
+    return None
+
+
+# --- checkpoints ---------------------------------------------------------------------------------
+
+
+def checkpoint_marks(total_timesteps: int, interval: int, batch_size: int) -> list[int]:
+    """Nominal steps that get a checkpoint: every multiple of `interval` below the total, and the total;
+    one per iteration (interval >= batch_size), so a multiple that the last iteration passes is left
+    to the total's checkpoint."""
+    last_iteration = -(-total_timesteps // batch_size)
+    return [m for m in range(interval, total_timesteps, interval) if -(-m // batch_size) < last_iteration] + [total_timesteps]
+
+
+def checkpoint_path(run_dir: Path, mark: int) -> Path:
+    return Path(run_dir) / "checkpoints" / f"step_{mark:09d}.pt"
+
+
+def checkpoint_step(path: Path) -> int:
+    """The step mark in a checkpoint's file name."""
+    return int(Path(path).stem.split("_")[1])
+
+
+def checkpoints_of(run_dir: Path) -> list[Path]:
+    return sorted((Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB))
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    found = checkpoints_of(run_dir)
+    return found[-1] if found else None
+
+
+def package_versions() -> dict[str, str | None]:
+    """The software stack of this process (checkpoints and sweeps keep MuJoCo versions apart)."""
+
+    def version(package: str) -> str | None:
+        try:
+            return importlib.metadata.version(package)
+        except importlib.metadata.PackageNotFoundError:
+            return None
+
+    return {"python": platform.python_version(), **{p: version(p) for p in ("torch", "numpy", "gymnasium", "mujoco")}}
+
+
+def code_revision(script: Path) -> dict:
+    """The training code of a run: the git commit of its checkout where there is one (and whether its
+    files differ from it), and always the sha1 of the script and of this package's sources."""
+    files = [Path(script).resolve(), *sorted(PACKAGE_DIR.glob("*.py"))]
+    digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()
+    commit = modified = None
+    try:
+        git = ["git", "-C", str(Path(script).resolve().parent)]
+        commit = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip() or None
+        if commit:
+            status = subprocess.run([*git, "status", "--porcelain", "--", *map(str, files)], capture_output=True, text=True, timeout=10)
+            modified = bool(status.stdout.strip())
+    except (OSError, subprocess.SubprocessError):  # no git, or not a checkout
+        commit = None
+    return {"commit": commit, "modified": modified, "sha1": digest}
+
+
+def non_finite(state: dict) -> list[str]:
+    """The names of the tensors of a state dict that hold a NaN or an infinity."""
+    return [name for name, value in state.items() if torch.is_tensor(value) and value.is_floating_point() and not torch.isfinite(value).all()]
+
+
+def read_checkpoint_file(path: Path) -> dict:
+    """A checkpoint dict, pickle-free (weights_only). ValueError with one line for anything unreadable."""
+    try:
+        ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
+        first_line = str(e).splitlines()[0] if str(e) else ""
+        raise ValueError(f"unreadable checkpoint ({type(e).__name__}: {first_line})") from None
+    if not isinstance(ckpt, dict) or "model" not in ckpt:
+        raise ValueError("not a PGG checkpoint")
+    return ckpt
+
+
+def checkpoint_bytes(payload: dict) -> bytes:
+    """The file a checkpoint is saved as, proven readable: it loads back with weights_only=True, or
+    CheckpointError says what in it cannot (so a run fails at its first checkpoint, not at resume)."""
+    buffer = io.BytesIO()
+    torch.save(payload, buffer)
+    data = buffer.getvalue()
+    try:
+        torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
+    except Exception as e:
+        raise CheckpointError(f"the checkpoint would not load back ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+    return data
+
+
+class CheckpointError(Exception):
+    """A checkpoint that must not be written; the message is one line."""
+
+
+# --- RNG and environment state -------------------------------------------------------------------
+
+
+def seed_everything(args) -> None:
+    random.seed(args.seed)
+    np.random.seed(args.seed)
+    torch.manual_seed(args.seed)
+    torch.backends.cudnn.deterministic = args.torch_deterministic
+    torch.use_deterministic_algorithms(args.torch_deterministic)
+    torch.set_num_threads(args.torch_threads)
+
+
+def rng_state() -> dict:
+    """torch's, numpy's and Python's global generators, pickle-free."""
+    numpy_state = np.random.get_state(legacy=False)
+    numpy_state["state"]["key"] = torch.from_numpy(numpy_state["state"]["key"].astype(np.int64))
+    return {"torch": torch.get_rng_state(), "numpy": numpy_state, "python": random.getstate()}
+
+
+def set_rng_state(state: dict) -> None:
+    torch.set_rng_state(state["torch"])
+    numpy_state = state["numpy"]
+    numpy_state["state"]["key"] = numpy_state["state"]["key"].numpy().astype(np.uint32)
+    np.random.set_state(numpy_state)
+    random.setstate(state["python"])
+
+
+# What a sub-env carries from one step to the next, besides its RNG and a MuJoCo task's simulation
+# state: wrapper counters (time limit, episode statistics, reward scaling) and a classic-control task's
+# physical state. Saved with a checkpoint so that a resumed run continues the very episodes it was in.
+ENV_STATE_ATTRIBUTES = (
+    "_elapsed_steps", "_has_reset", "episode_returns", "episode_lengths", "state", "steps_beyond_terminated",
+    "discounted_return", "return_mean", "return_var", "return_count",
+)  # fmt: skip
+
+
+def wrapper_chain(env: gym.Env):
+    while True:
+        yield env
+        if not isinstance(env, gym.Wrapper):
+            return
+        env = env.env
+
+
+def pickle_free(value):
+    """`value` as a weights-only checkpoint holds it: arrays as tensors, numpy scalars as Python
+    numbers, inside tuples and lists too (MountainCar's state is a tuple of np.float64)."""
+    if isinstance(value, np.ndarray):
+        return torch.from_numpy(value.copy())
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, (tuple, list)):
+        return type(value)(pickle_free(v) for v in value)
+    return value
+
+
+def from_checkpoint(value):
+    """The inverse of pickle_free: tensors back to (writable) numpy arrays."""
+    if isinstance(value, torch.Tensor):
+        return value.numpy().copy()
+    if isinstance(value, (tuple, list)):
+        return type(value)(from_checkpoint(v) for v in value)
+    return value
+
+
+def env_state(envs) -> list[dict]:
+    """The state of every sub-env as plain values and tensors (pickle-free): its wrappers' counters and
+    statistics, its RNG and, where it is a classic-control or MuJoCo task, the task's own state
+    ("complete"; for other tasks a resumed run starts fresh episodes)."""
+    states = []
+    for env in envs.envs:
+        task = env.unwrapped
+        layers = [
+            {name: pickle_free(value) for name, value in vars(layer).items() if name in ENV_STATE_ATTRIBUTES}
+            for layer in wrapper_chain(env)
+        ]
+        complete = hasattr(task, "state") or hasattr(task, "data")
+        states.append({"layers": layers, "rng": task.np_random.bit_generator.state, "complete": complete})
+        if hasattr(task, "data"):
+            # MuJoCo: every array of mjData, not only the integration state. Quantities derived from
+            # the state (body positions, contact forces) lag it by one step after mj_step, and some
+            # tasks read them (Humanoid's reward and observation): mj_forward would not restore them.
+            data = task.data
+            arrays = {name: getattr(data, name) for name in dir(data) if not name.startswith("_")}
+            states[-1]["mujoco"] = {name: torch.from_numpy(a.copy()) for name, a in arrays.items() if isinstance(a, np.ndarray)}
+            states[-1]["mujoco_time"] = float(data.time)
+    return states
+
+
+def restore_env_state(envs, states: list[dict]) -> None:
+    for env, state in zip(envs.envs, states):
+        for layer, saved in zip(wrapper_chain(env), state["layers"]):
+            for name, value in saved.items():
+                setattr(layer, name, from_checkpoint(value))
+        env.unwrapped.np_random.bit_generator.state = state["rng"]
+        if "mujoco" in state:
+            data = env.unwrapped.data
+            for name, saved in state["mujoco"].items():
+                target = getattr(data, name)
+                # Arrays sized by the contacts of the moment may differ in shape; the next step recomputes them.
+                if target.flags.writeable and target.shape == tuple(saved.shape):
+                    target[...] = saved.numpy()
+            data.time = state["mujoco_time"]
+
+
+# --- the run directory ---------------------------------------------------------------------------
+
+
+class RunDirError(Exception):
+    """A run directory this run must not write to; the message is one line that says what to do."""
+
+
+class NonFiniteError(Exception):
+    """Training produced a NaN or an infinity; the message is one line naming the iteration."""
+
+
+def default_run_name(args) -> str:
+    return f"{args.env_id}__{args.exp_name}__g{args.guidance:g}__p{args.cond_dropout:g}__s{args.seed}"
+
+
+class Run:
+    """One training run's directory, locked while this process trains there, and its checkpoints.
+
+    `Run.prepare` applies the rules: a directory that holds checkpoints is only continued (--resume,
+    same training arguments, from its last readable checkpoint) or replaced (--overwrite), and every
+    check runs before anything is deleted. A finished run is left as it is."""
+
+    def __init__(self, args, kind: str, script: Path):
+        self.args, self.kind, self.script = args, kind, Path(script)
+        self.dir = Path(args.output_dir) / (args.run_name or default_run_name(args))
+        self.lock = None
+        self.resume_from: Path | None = None
+        self.finished = False
+        self.notes: list[str] = []
+        self.code = None
+        self.recent_returns = deque(maxlen=20)
+        self.progress: Progress | None = None
+        self.writer = None
+
+    @classmethod
+    def prepare(cls, args, kind: str, script: Path) -> "Run":
+        """Creates and locks the run directory and writes args.json. Raises RunDirError (one line) or
+        OSError (not writable)."""
+        run = cls(args, kind, script)
+        run.dir.mkdir(parents=True, exist_ok=True)
+        try:
+            run.lock = lock_directory(run.dir)
+        except LockedError as e:
+            raise RunDirError(f"{e}; wait for it or stop it") from None
+        try:
+            run.apply_rules()
+        except BaseException:
+            run.close()
+            raise
+        return run
+
+    def apply_rules(self) -> None:
+        args = self.args
+        latest = latest_checkpoint(self.dir)
+        if latest is not None and not args.overwrite:
+            latest = self.check_continuable(latest)
+        if args.resume and latest is not None and checkpoint_path(self.dir, args.total_timesteps).exists():
+            self.finished = True  # nothing to train, and nothing of it to touch
+            return
+        if args.resume and latest is not None:
+            self.resume_from = latest
+        else:  # a fresh start; unreadable checkpoints set aside stay, unless --overwrite
+            shutil.rmtree(self.dir / "videos", ignore_errors=True)
+            if args.overwrite:
+                shutil.rmtree(self.dir / "checkpoints", ignore_errors=True)
+            for stale in [*checkpoints_of(self.dir), *self.dir.glob("events.out.tfevents.*")]:
+                stale.unlink()
+        write_atomic(self.dir / "args.json", json.dumps(asdict(args), indent=2))
+
+    def check_continuable(self, latest: Path) -> Path:
+        """Raises RunDirError unless this run may continue the one in its directory; returns the
+        checkpoint to continue from. With --resume, unreadable checkpoints at the end are set aside
+        (renamed `*.unreadable`, kept) and the last readable one is used."""
+        args = self.args
+        while True:
+            try:
+                ckpt = read_checkpoint_file(latest)
+                bad = non_finite(ckpt["model"])
+                if bad:
+                    raise ValueError(f"non-finite weights ({', '.join(bad[:3])})")
+                break
+            except ValueError as e:
+                if not args.resume:
+                    raise RunDirError(f"cannot read {latest} ({e}): pass --resume to continue from the last readable "
+                                      "checkpoint (this one is kept, set aside), or --overwrite to start over") from None  # fmt: skip
+                aside = latest.with_name(latest.name + ".unreadable")
+                os.replace(latest, aside)
+                self.notes.append(f"set aside {aside.name}: {e}")
+                latest = latest_checkpoint(self.dir)
+                if latest is None:
+                    return None
+        recorded = training_arguments(ckpt.get("args", {}), self.defaults())
+        wanted = training_arguments(asdict(args), self.defaults())
+        differing = [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
+        if differing:
+            raise RunDirError(
+                f"{self.dir} holds a run with other arguments ({', '.join(differing)}): "
+                "choose another --run-name, or pass --overwrite to replace it"
+            )
+        if not args.resume:
+            finished = checkpoint_path(self.dir, args.total_timesteps).exists()
+            state = "a finished run" if finished else f"an unfinished run (last checkpoint {latest.name})"
+            how = "" if finished else "pass --resume to continue it, or "
+            raise RunDirError(f"{self.dir} holds {state}: {how}pass --overwrite to train it again from scratch")
+        if "resume" not in ckpt:
+            raise RunDirError(f"{latest} predates resumable checkpoints: pass --overwrite to start over")
+        return latest
+
+    def defaults(self) -> dict:
+        return asdict(type(self.args)())
+
+    def close(self) -> None:
+        if self.progress is not None:
+            self.progress.close()
+        if self.writer is not None:
+            self.writer.close()
+            if self.args.track:
+                import wandb
+
+                wandb.finish()
+            self.writer = None
+        if self.lock is not None:
+            self.lock.close()
+            self.lock = None
+
+    # --- during training ---
+
+    def checkpoint_to_resume(self) -> dict | None:
+        """The checkpoint this run continues from (--resume), or None for a fresh start."""
+        if self.resume_from is None:
+            return None
+        print(f"resuming from {self.resume_from}", flush=True)
+        return read_checkpoint_file(self.resume_from)
+
+    def open_writer(self, resumed: dict | None):
+        """TensorBoard's writer (and W&B's run with --track). Events written after the checkpoint by
+        the run that stopped are dropped by TensorBoard's readers."""
+        from torch.utils.tensorboard import SummaryWriter
+
+        args = self.args
+        if args.track:
+            import wandb
+
+            wandb.init(project=args.wandb_project_name, entity=args.wandb_entity, sync_tensorboard=True,
+                       config=asdict(args), name=self.dir.name, save_code=True)  # fmt: skip
+        self.writer = SummaryWriter(str(self.dir), purge_step=resumed["global_step"] + 1 if resumed else None)
+        self.writer.add_text(
+            "hyperparameters",
+            "|param|value|\n|-|-|\n%s" % "\n".join(f"|{key}|{value}|" for key, value in asdict(args).items()),
+        )
+        return self.writer
+
+    def video_dir(self, resumed: dict | None) -> Path | None:
+        """Where --capture-video records; a resumed run records into a folder of its own, as
+        RecordVideo numbers episodes from 0 again."""
+        if not self.args.capture_video:
+            return None
+        return self.dir / "videos" / (f"from_step_{resumed['global_step']}" if resumed else "")
+
+    def restore(self, resumed: dict, envs) -> tuple[int, int, np.ndarray | None, np.ndarray | None]:
+        """(next iteration, global step, next obs, next done) of the resumed run, its sub-envs and
+        RNGs restored. The observation is None for a task whose own state a checkpoint cannot hold:
+        the caller starts fresh episodes, a statistically equal run."""
+        state = resumed["resume"]
+        restore_env_state(envs, state["envs"])
+        next_obs = next_done = None
+        if all(sub_env["complete"] for sub_env in state["envs"]):
+            next_obs, next_done = state["next_obs"].numpy().copy(), state["next_done"].numpy().copy()
+        set_rng_state(state["rng"])
+        return state["iteration"] + 1, resumed["global_step"], next_obs, next_done
+
+    def start_progress(self, total_steps: int, global_step: int, marks: list[int]) -> deque:
+        """Starts the progress display; returns the checkpoint marks still ahead."""
+        self.progress = Progress("training", total_steps, global_step, unit="steps")
+        return deque(m for m in marks if m > global_step)
+
+    def on_episode(self, episodic_return: float, episodic_length: int, step: int) -> None:
+        self.recent_returns.append(episodic_return)
+        self.writer.add_scalar("charts/episodic_return", episodic_return, step)
+        self.writer.add_scalar("charts/episodic_length", episodic_length, step)
+
+    def report(self, global_step: int, iteration: int, stats: dict, weights: torch.Tensor) -> float:
+        """Updates the progress display; returns this process's SPS. NonFiniteError where a loss or
+        a weight of this iteration is not finite: the run stops, its earlier checkpoints kept."""
+        bad = [key for key, value in stats.items() if key.startswith("losses/") and key != "losses/explained_variance"
+               and not math.isfinite(value)]  # fmt: skip
+        if bad or not torch.isfinite(weights).all():
+            what = f"non-finite {', '.join(bad)}" if bad else "non-finite weights"
+            latest = latest_checkpoint(self.dir)
+            kept = f"checkpoints up to {latest.name} are kept" if latest else "no checkpoint was written"
+            raise NonFiniteError(f"iteration {iteration} (global step {global_step:,}): {what}; {kept}")
+        sps = self.progress.rate(global_step)
+        mean = f"{np.mean(self.recent_returns):.1f}" if self.recent_returns else "-"
+        self.progress.update(global_step, f"{int(sps):,} SPS  return(last 20) {mean}")
+        return int(sps)
+
+    def save(self, mark: int, global_step: int, model: dict, shapes: dict, resume: dict) -> None:
+        """Writes the checkpoint of `mark`: self-contained, pickle-free (proven by loading it back) and
+        atomic. `shapes`: the script's own fields (its action space and sizes)."""
+        if self.code is None:
+            self.code = code_revision(self.script)
+        payload = {
+            "format_version": CHECKPOINT_FORMAT_VERSION,
+            "script": self.script.stem,
+            "action_space": self.kind,
+            "env_id": self.args.env_id,
+            **shapes,
+            "global_step": int(global_step),
+            "step_mark": int(mark),
+            "args": asdict(self.args),
+            "versions": package_versions(),
+            "code": self.code,
+            "model": model,
+            "resume": resume,
+        }
+        path = checkpoint_path(self.dir, mark)
+        try:
+            data = checkpoint_bytes(payload)
+        except CheckpointError as e:
+            raise CheckpointError(f"{path}: {e}") from None
+        write_atomic(path, data)
+        mean = np.mean(self.recent_returns) if self.recent_returns else float("nan")
+        print(f"global_step={global_step} mark={mark} mean_return(last 20)={mean:.1f}", flush=True)
+
+
+def resume_state(iteration: int, optimizer, envs, next_obs: np.ndarray, next_done: np.ndarray) -> dict:
+    """What continuing a run needs besides the model: the optimizer, the sub-envs mid-episode, the
+    next observation and every RNG state."""
+    return {
+        "iteration": iteration,
+        "optimizer": optimizer.state_dict(),
+        "envs": env_state(envs),
+        "next_obs": torch.from_numpy(next_obs.copy()),
+        "next_done": torch.from_numpy(next_done.copy()),
+        "rng": rng_state(),
+    }
+
+
+def launch(args, kind: str, script: str, train) -> None:
+    """A training script's `main` after parsing: checks every argument before the disk is touched,
+    prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
+    exit 2 for bad arguments or a run directory that must not be used, 130 for Ctrl-C, 1 for a full
+    disk or a non-finite run (its earlier checkpoints kept)."""
+    error = argument_error(args, kind)
+    run = None
+    if error is None:
+        try:
+            run = Run.prepare(args, kind, Path(script))
+        except RunDirError as e:
+            error = str(e)
+        except OSError as e:
+            error = f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
+    if error is not None:
+        print(f"error: {error}", file=sys.stderr)
+        sys.exit(2)
+    for note in run.notes:
+        print(f"note: {note}", file=sys.stderr)
+    print(f"run directory: {run.dir}")
+    if run.finished:
+        run.close()
+        print(f"{run.dir} holds a finished run ({latest_checkpoint(run.dir).name}); nothing to train")
+        return
+    try:
+        train(args, run)
+    except (KeyboardInterrupt, OSError, NonFiniteError, CheckpointError) as e:
+        latest = latest_checkpoint(run.dir)
+        if isinstance(e, KeyboardInterrupt):
+            kept = f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
+            print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
+            sys.exit(130)
+        kept = f"; checkpoints up to {latest.name} are kept" if latest and isinstance(e, OSError) else ""
+        print(f"error: {e.strerror or e if isinstance(e, OSError) else e}{kept}", file=sys.stderr)
+        sys.exit(1)
+    finally:
+        run.close()
