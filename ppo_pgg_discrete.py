@@ -33,6 +33,8 @@ from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
 from pgg_utils.fast import flatten_parameters, numpy_forward, numpy_layers
 
+ACTION_SPACE = "discrete"  # the checkpoints' kind; the sweep picks this script by it
+
 
 @dataclass
 class Args(RunArgs):
@@ -463,7 +465,7 @@ def checkpoint_shapes(envs) -> dict:
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    if ckpt.get("format_version") not in runs.READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != "discrete":
+    if ckpt.get("format_version") not in runs.READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != ACTION_SPACE:
         raise ValueError(f"{source} is not a discrete PGG checkpoint of format {runs.READABLE_FORMAT_VERSIONS}")
     agent = Agent(ckpt["obs_dim"], ckpt["n_actions"])
     agent.load_state_dict(ckpt["model"])
@@ -478,7 +480,7 @@ def load_checkpoint(path) -> tuple[Agent, dict]:
 
 def main() -> None:
     args = tyro.cli(Args)
-    runs.launch(args, "discrete", __file__, train)
+    runs.launch(args, ACTION_SPACE, __file__, train)
 
 
 if __name__ == "__main__":

@@ -49,6 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep  # noqa: E402
 import ppo_pgg_continuous  # noqa: E402
 import ppo_pgg_discrete  # noqa: E402
+from pgg_utils.runs import train_in_process  # noqa: E402
 
 CLEANRL_SPS = {"CartPole-v1": (3400, 4000), "Hopper-v4": (780, 780)}
 CLEANRL_SCRIPTS = {"CartPole-v1": "ppo.py", "Hopper-v4": "ppo_continuous_action.py"}
@@ -157,7 +158,7 @@ def interleaved_training(module, runs: list) -> list[dict[str, list[float]]]:
         try:
             with tempfile.TemporaryDirectory() as tmp:
                 args.output_dir = tmp
-                module.train(args, module.prepare_run_dir(args))
+                train_in_process(module, args)
         except BaseException as e:
             errors.append(e)
         finally:
@@ -241,7 +242,7 @@ def sweep_checkpoint(given: dict[str, Path], env_id: str, module, args, tmp: str
     if env_id in given:
         return given[env_id]
     args.output_dir = tmp
-    module.train(args, module.prepare_run_dir(args))
+    train_in_process(module, args)
     return sorted(Path(tmp).rglob("step_*.pt"))[-1]
 
 

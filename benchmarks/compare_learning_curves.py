@@ -11,7 +11,6 @@ under the learning curve) and over the last tenth of its episodes. Prints both p
 Welch's t-test between them. Not part of the test suite: it takes minutes.
 """
 
-import importlib.util
 import subprocess
 import sys
 import tempfile
@@ -24,6 +23,8 @@ from scipy import stats
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from compare_revisions import CHILD_ENV, WORKTREE, export  # noqa: E402
 
 
 @dataclass
@@ -42,29 +43,20 @@ class Args:
     """train the working tree's runs with --compile (the reference's stay eager): the check behind it"""
 
 
-def load_script(source: str, name: str):
-    """The module defined by `source`, a training script's text."""
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp, f"{name}.py")
-        path.write_text(source)
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(module)
-    return module
-
-
-def scores(module, args: Args, compile: bool = False) -> np.ndarray:
-    """(seeds, 2): mean episodic return over each run, and over its last tenth of episodes."""
+def scores(tree: Path, script: str, args: Args, compile: bool = False) -> np.ndarray:
+    """(seeds, 2): mean episodic return over each run, and over its last tenth of episodes. Each run
+    is `script` of the checkout `tree`, run as a command (with that revision's own pgg_utils)."""
     rows = []
     for seed in range(1, args.seeds + 1):
         with tempfile.TemporaryDirectory() as tmp:
-            run_args = module.Args(
-                env_id=args.env_id, total_timesteps=args.total_timesteps, guidance=args.guidance, seed=seed,
-                output_dir=tmp, checkpoint_interval=args.total_timesteps, **({"compile": True} if compile else {}),
-            )  # fmt: skip
-            run_dir = module.prepare_run_dir(run_args)
-            module.train(run_args, run_dir)
-            events = EventAccumulator(str(run_dir))
+            command = [sys.executable, str(tree / script), "--env-id", args.env_id, "--total-timesteps",
+                       str(args.total_timesteps), "--guidance", str(args.guidance), "--seed", str(seed),
+                       "--output-dir", tmp, "--run-name", "run", "--checkpoint-interval", str(args.total_timesteps),
+                       *(["--compile"] if compile else [])]  # fmt: skip
+            done = subprocess.run(command, cwd=tree, env=dict(CHILD_ENV, PYTHONPATH=str(tree)), capture_output=True, text=True)
+            if done.returncode:
+                sys.exit(f"error: {script} at {tree.name} failed: {(done.stderr.strip().splitlines() or ['?'])[-1]}")
+            events = EventAccumulator(str(Path(tmp, "run")))
             events.Reload()
             returns = np.array([e.value for e in events.Scalars("charts/episodic_return")])
         rows.append((returns.mean(), returns[-max(1, len(returns) // 10) :].mean()))
@@ -82,15 +74,17 @@ def main() -> None:
     discrete = isinstance(env.action_space, gym.spaces.Discrete)
     env.close()
     script = "ppo_pgg_discrete.py" if discrete else "ppo_pgg_continuous.py"
-    shown = subprocess.run(["git", "show", f"{args.rev}:{script}"], cwd=ROOT, capture_output=True, text=True)
-    if shown.returncode:
-        sys.exit(f"error: cannot read {script} at {args.rev}: {shown.stderr.strip().splitlines()[-1]}")
-    results = {
-        args.rev: scores(load_script(shown.stdout, "reference_script"), args),
-        "working tree" + (" --compile" if args.compile else ""): scores(
-            load_script((ROOT / script).read_text(), "current_script"), args, args.compile
-        ),
-    }
+    with tempfile.TemporaryDirectory() as scratch:
+        trees = {"reference": Path(scratch, "reference"), "working tree": Path(scratch, "worktree")}
+        try:
+            export(args.rev, trees["reference"])
+            export(WORKTREE, trees["working tree"])
+        except subprocess.CalledProcessError as e:
+            sys.exit(f"error: cannot export {args.rev}: {e.stderr.decode().strip().splitlines()[-1] if e.stderr else e}")
+        results = {
+            args.rev: scores(trees["reference"], script, args),
+            "working tree" + (" --compile" if args.compile else ""): scores(trees["working tree"], script, args, args.compile),
+        }
     print(f"{script} on {args.env_id}, {args.seeds} seeds x {args.total_timesteps:,} steps, guidance {args.guidance:g}")
     for i, what in enumerate(("mean return over the run", "mean return, last tenth")):
         (ref_name, ref), (cur_name, cur) = ((name, values[:, i]) for name, values in results.items())

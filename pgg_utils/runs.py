@@ -375,9 +375,6 @@ class Run:
         while True:
             try:
                 ckpt = read_checkpoint_file(latest)
-                bad = non_finite(ckpt["model"])
-                if bad:
-                    raise ValueError(f"non-finite weights ({', '.join(bad[:3])})")
                 break
             except ValueError as e:
                 if not args.resume:
@@ -389,6 +386,9 @@ class Run:
                 latest = latest_checkpoint(self.dir)
                 if latest is None:
                     return None
+        if bad := non_finite(ckpt["model"]):
+            raise RunDirError(f"{latest} holds non-finite weights ({', '.join(bad[:3])}): the run diverged, and continuing "
+                              "it would diverge again; train with other arguments, or pass --overwrite")  # fmt: skip
         recorded = training_arguments(ckpt.get("args", {}), self.defaults())
         wanted = training_arguments(asdict(args), self.defaults())
         differing = [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
@@ -534,6 +534,18 @@ def resume_state(iteration: int, optimizer, envs, next_obs: np.ndarray, next_don
         "next_done": torch.from_numpy(next_done.copy()),
         "rng": rng_state(),
     }
+
+
+def train_in_process(script, args) -> Path:
+    """Prepares the run directory of `args` and trains it in this process with `script`, a training
+    script's module, as its `main` does but raising instead of exiting; returns the run directory."""
+    run = Run.prepare(args, script.ACTION_SPACE, Path(script.__file__))
+    try:
+        if not run.finished:
+            script.train(args, run)
+    finally:
+        run.close()
+    return run.dir
 
 
 def launch(args, kind: str, script: str, train) -> None:

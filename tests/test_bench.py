@@ -8,6 +8,7 @@ import pytest
 
 import ppo_pgg_discrete as pgg
 from conftest import ROOT
+from pgg_utils import runs
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 import bench_speed  # noqa: E402
@@ -56,7 +57,7 @@ def test_overhead_interval_contains_the_ratio_of_sums():
 def test_sweep_checkpoints_are_matched_to_their_env_and_bad_ones_are_one_line_of_error(tmp_path):
     args = tiny_run(1.1)
     args.output_dir, args.checkpoint_interval = str(tmp_path), 10**9
-    pgg.train(args, pgg.prepare_run_dir(args))
+    runs.train_in_process(pgg, args)
     (checkpoint,) = tmp_path.rglob("step_*.pt")
     assert bench_speed.checkpoints_by_env([str(checkpoint)]) == {"CartPole-v1": checkpoint}
 

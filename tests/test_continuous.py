@@ -10,23 +10,22 @@ import pytest
 import torch
 
 import ppo_pgg_continuous as pgg
-from conftest import ROOT
+from conftest import ROOT, small_args, train
+from pgg_utils import runs
+from pgg_utils.paper import PAPER_ENVS
 
-PAPER_TASKS = ["HalfCheetah-v4", "Hopper-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4"]
+PAPER_TASKS = PAPER_ENVS["continuous"]
 
 
 def run(args: pgg.Args):
-    run_dir = pgg.prepare_run_dir(args)
-    pgg.train(args, run_dir)
-    return run_dir
+    return train(pgg, args)
 
 
-def small_args(tmp_path, **overrides) -> pgg.Args:
-    base = pgg.Args(
-        env_id="InvertedPendulum-v4", total_timesteps=1024, num_steps=512, num_minibatches=8, update_epochs=2,
-        checkpoint_interval=512, output_dir=str(tmp_path),
-    )  # fmt: skip
-    return replace(base, **overrides)
+def tiny_args(tmp_path, **overrides) -> pgg.Args:
+    """Two checkpoints of PPO on InvertedPendulum, 2 iterations of 512 steps."""
+    base = dict(env_id="InvertedPendulum-v4", total_timesteps=1024, num_steps=512, num_minibatches=8, update_epochs=2,
+                checkpoint_interval=512, guidance=1.0, cond_dropout=0.0)  # fmt: skip
+    return small_args("continuous", tmp_path, **{**base, **overrides})
 
 
 @pytest.mark.parametrize("guidance", [0.0, 0.5, 1.0, 1.1, 1.5, 3.0])
@@ -92,12 +91,12 @@ class VanillaAgent(pgg.Agent):
 
 
 def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
-    args = small_args(tmp_path)
-    ours = torch.load(pgg.checkpoint_path(run(args), 1024), weights_only=True)["model"]
+    args = tiny_args(tmp_path)
+    ours = torch.load(runs.checkpoint_path(run(args), 1024), weights_only=True)["model"]
     monkeypatch.setattr(pgg, "Agent", VanillaAgent)
     monkeypatch.setattr(pgg, "guide", lambda cond, null, guidance: cond)
     monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
-    vanilla = torch.load(pgg.checkpoint_path(run(replace(args, run_name="vanilla")), 1024), weights_only=True)["model"]
+    vanilla = torch.load(runs.checkpoint_path(run(replace(args, run_name="vanilla")), 1024), weights_only=True)["model"]
     assert set(ours) - set(vanilla) == {"null_obs"}
     assert [k for k in vanilla if not torch.equal(ours[k], vanilla[k])] == []
 
@@ -118,8 +117,8 @@ print(json.dumps(mean.double().tolist()))
 
 def test_checkpoint_carries_observation_statistics(tmp_path):
     """A checkpoint alone maps a raw observation to the training-time action mean (cleanrl#425)."""
-    run_dir = run(small_args(tmp_path, guidance=1.1, env_id="Hopper-v4"))
-    agent, ckpt = pgg.load_checkpoint(pgg.checkpoint_path(run_dir, 1024))
+    run_dir = run(tiny_args(tmp_path, guidance=1.1, env_id="Hopper-v4"))
+    agent, ckpt = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 1024))
     assert ckpt["global_step"] == 1024 and ckpt["action_space"] == "continuous" and ckpt["env_id"] == "Hopper-v4"
     assert float(agent.obs_norm.count) > 1000 and agent.obs_norm.mean.abs().sum() > 0
     raw = np.random.default_rng(0).normal(size=(3, 11)) * 2 + 1
@@ -128,7 +127,7 @@ def test_checkpoint_carries_observation_statistics(tmp_path):
         unnormalised = agent.guided_mean(torch.as_tensor(raw, dtype=torch.float32).clamp(-10, 10), 1.1)
     assert not torch.allclose(in_process, unnormalised, atol=1e-3)  # the statistics matter
     out = subprocess.run(
-        [sys.executable, "-c", CHECK_IN_FRESH_PROCESS, str(ROOT), str(pgg.checkpoint_path(run_dir, 1024)),
+        [sys.executable, "-c", CHECK_IN_FRESH_PROCESS, str(ROOT), str(runs.checkpoint_path(run_dir, 1024)),
          json.dumps(raw.tolist())],
         capture_output=True, text=True, check=True,
     )  # fmt: skip
@@ -237,7 +236,7 @@ def test_reward_scaling_matches_gymnasium_bit_for_bit():
 
 def test_short_inverted_pendulum_run_learns(tmp_path):
     run_dir = run(pgg.Args(env_id="InvertedPendulum-v4", total_timesteps=30_000, guidance=1.1, output_dir=str(tmp_path)))
-    agent, _ = pgg.load_checkpoint(pgg.checkpoint_path(run_dir, 30_000))
+    agent, _ = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 30_000))
     env = gym.make("InvertedPendulum-v4")
     returns = []
     for episode in range(5):
@@ -255,7 +254,7 @@ def test_short_inverted_pendulum_run_learns(tmp_path):
 
 @pytest.mark.parametrize("env_id", PAPER_TASKS)
 def test_paper_task_steps_through_env_factory(env_id):
-    if env_id == "Pusher-v4" and pgg.check_args(pgg.Args(env_id=env_id)) is not None:
+    if env_id == "Pusher-v4" and runs.argument_error(pgg.Args(env_id=env_id), "continuous") is not None:
         pytest.skip("Pusher-v4 needs mujoco<3, which is not installed")
     envs = pgg.make_vector_env(env_id, 2, seed=0, discount=0.99, reward_clip=10.0)
     obs, _ = envs.reset(seed=0)
@@ -270,9 +269,9 @@ def test_paper_task_steps_through_env_factory(env_id):
 
 
 def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls):
-    args = small_args(tmp_path, total_timesteps=512, guidance=1.1, cond_dropout=0.25)
-    eager = torch.load(pgg.checkpoint_path(run(args), 512), weights_only=True)["model"]
-    compiled = torch.load(pgg.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 512), weights_only=True)["model"]
+    args = tiny_args(tmp_path, total_timesteps=512, guidance=1.1, cond_dropout=0.25)
+    eager = torch.load(runs.checkpoint_path(run(args), 512), weights_only=True)["model"]
+    compiled = torch.load(runs.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 512), weights_only=True)["model"]
     assert compiled_calls == [pgg.minibatch_loss] * (args.update_epochs * args.num_minibatches)
     for key, value in eager.items():  # one iteration's 16 Adam steps: the same update to float rounding
         torch.testing.assert_close(compiled[key], value, rtol=1e-4, atol=1e-5)

@@ -10,18 +10,18 @@ import torch
 import torch.nn as nn
 
 import ppo_pgg_discrete as pgg
-from conftest import ROOT
+from conftest import ROOT, small_args, train
+from pgg_utils import runs
 
 
-def small_args(tmp_path, **overrides) -> pgg.Args:
-    base = pgg.Args(total_timesteps=2048, checkpoint_interval=1024, output_dir=str(tmp_path), num_steps=64)
-    return replace(base, **overrides)
+def tiny_args(tmp_path, **overrides) -> pgg.Args:
+    """Two checkpoints of PPO on CartPole, 8 iterations of 256 steps."""
+    return small_args("discrete", tmp_path, **{"total_timesteps": 2048, "checkpoint_interval": 1024, "guidance": 1.0,
+                                               "cond_dropout": 0.0, **overrides})  # fmt: skip
 
 
 def run(args: pgg.Args):
-    run_dir = pgg.prepare_run_dir(args)
-    pgg.train(args, run_dir)
-    return run_dir
+    return train(pgg, args)
 
 
 # --- the guided distribution ------------------------------------------------------------------
@@ -148,12 +148,12 @@ class VanillaAgent(pgg.Agent):
 
 
 def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
-    args = small_args(tmp_path, total_timesteps=4096, guidance=1.0, cond_dropout=0.0)
-    pgg_ckpt = torch.load(pgg.checkpoint_path(run(args), 4096), weights_only=True)
+    args = tiny_args(tmp_path, total_timesteps=4096, guidance=1.0, cond_dropout=0.0)
+    pgg_ckpt = torch.load(runs.checkpoint_path(run(args), 4096), weights_only=True)
     monkeypatch.setattr(pgg, "Agent", VanillaAgent)
     monkeypatch.setattr(pgg, "guide", lambda cond, null, guidance: cond)
     monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
-    vanilla_ckpt = torch.load(pgg.checkpoint_path(run(replace(args, run_name="vanilla")), 4096), weights_only=True)
+    vanilla_ckpt = torch.load(runs.checkpoint_path(run(replace(args, run_name="vanilla")), 4096), weights_only=True)
     assert set(pgg_ckpt["model"]) - set(vanilla_ckpt["model"]) == {"null_obs"}
     for key, value in vanilla_ckpt["model"].items():
         assert torch.equal(pgg_ckpt["model"][key], value), key
@@ -214,7 +214,7 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
 
 
 def test_checkpoints_round_trip_under_weights_only(tmp_path):
-    run_dir = run(small_args(tmp_path, guidance=1.1, total_timesteps=2500))
+    run_dir = run(tiny_args(tmp_path, guidance=1.1, total_timesteps=2500))
     files = sorted(p.name for p in (run_dir / "checkpoints").iterdir())
     assert files == ["step_000001024.pt", "step_000002048.pt", "step_000002500.pt"]
     assert (run_dir / "args.json").exists() and list(run_dir.glob("events.out.tfevents.*"))
@@ -227,10 +227,10 @@ def test_checkpoints_round_trip_under_weights_only(tmp_path):
 
 
 def test_same_seed_same_result(tmp_path):
-    args = small_args(tmp_path, cond_dropout=0.1, guidance=1.1)
-    a = torch.load(pgg.checkpoint_path(run(args), 2048), weights_only=True)["model"]
-    b = torch.load(pgg.checkpoint_path(run(replace(args, run_name="again")), 2048), weights_only=True)["model"]
-    c = torch.load(pgg.checkpoint_path(run(replace(args, run_name="other", seed=2)), 2048), weights_only=True)["model"]
+    args = tiny_args(tmp_path, cond_dropout=0.1, guidance=1.1)
+    a = torch.load(runs.checkpoint_path(run(args), 2048), weights_only=True)["model"]
+    b = torch.load(runs.checkpoint_path(run(replace(args, run_name="again")), 2048), weights_only=True)["model"]
+    c = torch.load(runs.checkpoint_path(run(replace(args, run_name="other", seed=2)), 2048), weights_only=True)["model"]
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert not all(torch.equal(a[k], c[k]) for k in a)
 
@@ -252,15 +252,15 @@ def evaluate(agent, guidance, episodes=10, seed=1000):
 
 def test_short_cartpole_run_learns(tmp_path):
     run_dir = run(pgg.Args(total_timesteps=50_000, guidance=1.1, output_dir=str(tmp_path)))
-    agent, _ = pgg.load_checkpoint(pgg.checkpoint_path(run_dir, 50_000))
+    agent, _ = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 50_000))
     # A random policy scores about 22. A broken GAE or autoreset stays far below this.
     assert evaluate(agent, 1.1) > 150
 
 
 def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls):
-    args = small_args(tmp_path, total_timesteps=256, checkpoint_interval=256, guidance=1.1, cond_dropout=0.25)
-    eager = torch.load(pgg.checkpoint_path(run(args), 256), weights_only=True)["model"]
-    compiled = torch.load(pgg.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 256), weights_only=True)["model"]
+    args = tiny_args(tmp_path, total_timesteps=256, checkpoint_interval=256, guidance=1.1, cond_dropout=0.25)
+    eager = torch.load(runs.checkpoint_path(run(args), 256), weights_only=True)["model"]
+    compiled = torch.load(runs.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 256), weights_only=True)["model"]
     assert compiled_calls == [pgg.minibatch_loss] * (args.update_epochs * args.num_minibatches)
     for key, value in eager.items():  # one iteration's 16 Adam steps: the same update to float rounding
         torch.testing.assert_close(compiled[key], value, rtol=1e-4, atol=1e-5)

@@ -9,6 +9,7 @@ import subprocess
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -17,43 +18,22 @@ import torch
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from conftest import ROOT
-
-SCRIPTS = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
-
-
-def small_args(kind: str, tmp_path, **overrides):
-    module = SCRIPTS[kind]
-    base = {
-        "discrete": dict(total_timesteps=1536, checkpoint_interval=512, num_steps=64),
-        # Humanoid: the task whose observation and reward read quantities MuJoCo derives a step late.
-        "continuous": dict(env_id="Humanoid-v4", total_timesteps=768, checkpoint_interval=256, num_steps=256,
-                           num_minibatches=4, update_epochs=2),
-    }[kind]  # fmt: skip
-    return replace(module.Args(output_dir=str(tmp_path), guidance=1.1, cond_dropout=0.1, **base), **overrides)
+from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
+from pgg_utils import files, progress, runs
+from pgg_utils.files import lock_directory
 
 
-def train(module, args):
-    run_dir = module.prepare_run_dir(args)
-    module.train(args, run_dir)
-    return run_dir
+def checkpoint(run_dir, mark) -> dict:
+    return torch.load(runs.checkpoint_path(run_dir, mark), weights_only=True)
 
 
-def checkpoint(module, run_dir, mark) -> dict:
-    return torch.load(module.checkpoint_path(run_dir, mark), weights_only=True)
+def run_training(kind: str, *flags, **kwargs):
+    return run_script(f"{SCRIPTS[kind].__name__}.py", *flags, **kwargs)
 
 
-def run_script(kind: str, *flags, **kwargs) -> subprocess.CompletedProcess:
-    script = ROOT / f"{SCRIPTS[kind].__name__}.py"
-    return subprocess.run([sys.executable, str(script), *flags], capture_output=True, text=True, timeout=300, **kwargs)
-
-
-def one_line_error(proc: subprocess.CompletedProcess, code: int = 2) -> str:
-    """The one line of error, besides gymnasium's expected two-line notice that v4 tasks are old."""
-    lines = [line for line in proc.stderr.strip().splitlines() if "DeprecationWarning" not in line and "logger.deprecation(" not in line]
-    assert proc.returncode == code and len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
-    return lines[0]
-
+def prepare(module, args) -> None:
+    """Applies the run directory's rules as the script's main does before it trains (RunDirError)."""
+    runs.Run.prepare(args, module.ACTION_SPACE, Path(module.__file__)).close()
 
 # --- resume ------------------------------------------------------------------------------------
 
@@ -69,11 +49,11 @@ def test_resumed_run_is_bit_identical_to_an_uninterrupted_one(kind, tmp_path):
     first, last = args.checkpoint_interval, args.total_timesteps
     stopped = tmp_path / "stopped"
     shutil.copytree(straight, stopped)
-    for later in module.checkpoint_path(stopped, first).parent.glob("*.pt"):
-        if later.name > module.checkpoint_path(stopped, first).name:
+    for later in runs.checkpoint_path(stopped, first).parent.glob("*.pt"):
+        if later.name > runs.checkpoint_path(stopped, first).name:
             later.unlink()
     resumed = train(module, replace(args, run_name="stopped", resume=True))
-    a, b = checkpoint(module, straight, last), checkpoint(module, resumed, last)
+    a, b = checkpoint(straight, last), checkpoint(resumed, last)
     assert a["model"].keys() == b["model"].keys()
     assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
     assert torch.equal(a["resume"]["optimizer"]["state"][0]["exp_avg"], b["resume"]["optimizer"]["state"][0]["exp_avg"])
@@ -85,7 +65,7 @@ def test_resume_continues_the_learning_rate_schedule_and_purges_later_events(tmp
 
     args = small_args("discrete", tmp_path, cond_dropout=0.0)
     run_dir = train(ppo_pgg_discrete, args)
-    ppo_pgg_discrete.checkpoint_path(run_dir, 1536).unlink()  # as if stopped after the 1024 checkpoint
+    runs.checkpoint_path(run_dir, 1536).unlink()  # as if stopped after the 1024 checkpoint
     train(ppo_pgg_discrete, replace(args, resume=True))
     events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
     events.Reload()
@@ -99,43 +79,48 @@ def test_resume_continues_the_learning_rate_schedule_and_purges_later_events(tmp
 def test_format_one_checkpoints_load_for_evaluation_but_do_not_resume(tmp_path):
     args = small_args("discrete", tmp_path, total_timesteps=1024)
     run_dir = train(ppo_pgg_discrete, args)
-    path = ppo_pgg_discrete.checkpoint_path(run_dir, 512)
-    old = checkpoint(ppo_pgg_discrete, run_dir, 512)
+    path = runs.checkpoint_path(run_dir, 512)
+    old = checkpoint(run_dir, 512)
     old = {key: value for key, value in old.items() if key not in ("resume", "versions")} | {"format_version": 1}
     torch.save(old, path)
-    ppo_pgg_discrete.checkpoint_path(run_dir, 1024).unlink()
+    runs.checkpoint_path(run_dir, 1024).unlink()
     agent, ckpt = ppo_pgg_discrete.load_checkpoint(path)
     assert ckpt["format_version"] == 1 and torch.equal(agent.null_obs, old["model"]["null_obs"])
-    with pytest.raises(ppo_pgg_discrete.RunDirError, match="predates resumable checkpoints"):
-        ppo_pgg_discrete.prepare_run_dir(replace(args, resume=True))
+    with pytest.raises(runs.RunDirError, match="predates resumable checkpoints"):
+        prepare(ppo_pgg_discrete, replace(args, resume=True))
     assert path.exists()
 
 
 def test_one_checkpoint_per_saved_iteration():
     """A mark that the last iteration passes is left to the total's checkpoint: interval 3900 of a
     4000-step run of 512-step batches would otherwise write step_3900 and step_4000 at one point."""
-    assert ppo_pgg_discrete.checkpoint_marks(4000, 3900, 512) == [4000]
-    assert ppo_pgg_continuous.checkpoint_marks(2500, 1024, 256) == [1024, 2048, 2500]
+    assert runs.checkpoint_marks(4000, 3900, 512) == [4000]
+    assert runs.checkpoint_marks(2500, 1024, 256) == [1024, 2048, 2500]
 
 
-def test_a_failed_checkpoint_write_leaves_the_previous_ones_whole(tmp_path, monkeypatch):
-    """A checkpoint is written to a temporary file and renamed: a write that dies half way (full disk,
-    kill) leaves no step_*.pt behind and the earlier checkpoints as they were."""
+def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_previous_ones_whole(tmp_path, monkeypatch, capsys):
+    """A checkpoint is written to a temporary file and renamed: a write that dies half way (full disk)
+    leaves no step_*.pt and no .tmp behind, the earlier checkpoints as they were, and one line of error
+    that names the file."""
     args = small_args("discrete", tmp_path)
-    real_save = torch.save
+    real_open = open
 
-    def dies_at_the_second(payload, path):
-        if payload["step_mark"] == 1024:
-            with open(path, "wb") as f:
-                f.write(b"half a checkpoint")
+    def full_at_the_second(path, mode="r", *rest, **kwargs):
+        handle = real_open(path, mode, *rest, **kwargs)
+        if "step_000001024" in str(path) and "w" in mode:
+            handle.write(b"half a checkpoint")
+            handle.close()
             raise OSError(28, "No space left on device")
-        real_save(payload, path)
+        return handle
 
-    monkeypatch.setattr(torch, "save", dies_at_the_second)
-    with pytest.raises(OSError):
-        train(ppo_pgg_discrete, args)
-    run_dir = tmp_path / ppo_pgg_discrete.default_run_name(args)
-    assert sorted(p.name for p in (run_dir / "checkpoints").glob("step_*.pt")) == ["step_000000512.pt"]
+    monkeypatch.setattr(files, "open", full_at_the_second, raising=False)
+    with pytest.raises(SystemExit) as exit_status:
+        runs.launch(args, "discrete", ppo_pgg_discrete.__file__, ppo_pgg_discrete.train)
+    error = capsys.readouterr().err.strip().splitlines()
+    assert exit_status.value.code == 1 and len(error) == 1, error
+    assert "step_000001024.pt" in error[0] and "No space left on device" in error[0] and "step_000000512.pt are kept" in error[0]
+    run_dir = tmp_path / runs.default_run_name(args)
+    assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
     ppo_pgg_discrete.load_checkpoint(run_dir / "checkpoints" / "step_000000512.pt")
 
 
@@ -163,18 +148,18 @@ def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
     envs.reset(seed=0)
     for _ in range(5):
         envs.step(np.full((1, 1), 0.5, np.float32))
-    states = ppo_pgg_continuous.env_state(envs)
+    states = runs.env_state(envs)
     assert states[0]["complete"] is False
     fresh = ppo_pgg_continuous.make_vector_env("Drift", 1, seed=0, discount=0.99, reward_clip=10.0)
     fresh.reset(seed=1)
-    ppo_pgg_continuous.restore_env_state(fresh, states)
-    saved, restored = (next(w for w in ppo_pgg_continuous.wrapper_chain(e.envs[0]) if isinstance(w, ppo_pgg_continuous.NormalizeClipReward))
+    runs.restore_env_state(fresh, states)
+    saved, restored = (next(w for w in runs.wrapper_chain(e.envs[0]) if isinstance(w, ppo_pgg_continuous.NormalizeClipReward))
                        for e in (envs, fresh))  # fmt: skip
     assert restored.return_count == saved.return_count == 1e-4 + 5 and restored.return_var == saved.return_var
 
 
 def test_checkpoint_records_the_software_stack(tmp_path):
-    ckpt = checkpoint(ppo_pgg_discrete, train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
+    ckpt = checkpoint(train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
     assert ckpt["versions"]["torch"] == torch.__version__ and ckpt["versions"]["gymnasium"]
 
 
@@ -185,7 +170,7 @@ def test_rerun_with_other_arguments_is_refused_before_touching_the_run(tmp_path)
     args = small_args("discrete", tmp_path, total_timesteps=1024)
     run_dir = train(ppo_pgg_discrete, args)
     before = {path: path.read_bytes() for path in run_dir.rglob("*") if path.is_file() and path.name != ".lock"}
-    proc = run_script(
+    proc = run_training(
         "discrete", "--output-dir", str(tmp_path), "--run-name", run_dir.name, "--total-timesteps", "1024",
         "--checkpoint-interval", "512", "--num-steps", "64", "--guidance", "1.1", "--cond-dropout", "0.1",
         "--learning-rate", "0.002",
@@ -197,7 +182,7 @@ def test_rerun_with_other_arguments_is_refused_before_touching_the_run(tmp_path)
 
 @pytest.mark.parametrize("flag", [["--learning-rate", "nan"], ["--guidance", "1e39"], ["--checkpoint-interval", "100"]])
 def test_invalid_arguments_are_refused_before_touching_the_disk(flag, tmp_path):
-    line = one_line_error(run_script("discrete", "--output-dir", str(tmp_path / "runs"), *flag))
+    line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path / "runs"), *flag))
     assert flag[0] in line
     assert not (tmp_path / "runs").exists()
 
@@ -205,11 +190,11 @@ def test_invalid_arguments_are_refused_before_touching_the_disk(flag, tmp_path):
 def test_finished_and_unfinished_runs_need_an_explicit_choice(tmp_path):
     args = small_args("discrete", tmp_path)
     run_dir = train(ppo_pgg_discrete, args)
-    with pytest.raises(ppo_pgg_discrete.RunDirError, match="holds a finished run: pass --overwrite"):
-        ppo_pgg_discrete.prepare_run_dir(args)
-    ppo_pgg_discrete.checkpoint_path(run_dir, 1536).unlink()
-    with pytest.raises(ppo_pgg_discrete.RunDirError, match=r"unfinished run \(last checkpoint step_000001024.pt\): pass --resume"):
-        ppo_pgg_discrete.prepare_run_dir(args)
+    with pytest.raises(runs.RunDirError, match="holds a finished run: pass --overwrite"):
+        prepare(ppo_pgg_discrete, args)
+    runs.checkpoint_path(run_dir, 1536).unlink()
+    with pytest.raises(runs.RunDirError, match=r"unfinished run \(last checkpoint step_000001024.pt\): pass --resume"):
+        prepare(ppo_pgg_discrete, args)
     train(ppo_pgg_discrete, replace(args, overwrite=True, total_timesteps=512, checkpoint_interval=512))
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
 
@@ -217,14 +202,14 @@ def test_finished_and_unfinished_runs_need_an_explicit_choice(tmp_path):
 def test_a_run_directory_in_use_is_refused(tmp_path):
     run_dir = tmp_path / "busy"
     run_dir.mkdir()
-    lock = ppo_pgg_discrete.lock_directory(run_dir)
+    lock = lock_directory(run_dir)
     try:
-        line = one_line_error(run_script("discrete", "--output-dir", str(tmp_path), "--run-name", "busy"))
+        line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path), "--run-name", "busy"))
         assert f"{run_dir} is in use by another process (pid {os.getpid()})" in line
     finally:
         lock.close()
     # The lock went with its holder: the directory is free again.
-    ppo_pgg_discrete.lock_directory(run_dir).close()
+    lock_directory(run_dir).close()
 
 
 # --- interaction ---------------------------------------------------------------------------------
@@ -253,11 +238,11 @@ def test_ctrl_c_exits_130_with_one_line_saying_what_is_kept(tmp_path):
 
 
 def test_progress_is_a_live_bar_in_a_terminal_and_plain_lines_in_a_log(tmp_path, capsys):
-    report = ppo_pgg_discrete.ProgressReport(total_steps=1000, first_step=0, interval=0.0)
-    report.update(500, [10.0, 20.0])
+    report = progress.Progress("training", 1000, 0, unit="steps", interval=0.0)
+    report.update(500, "123 SPS  return(last 20) 15.0")
     report.close()
     line = capsys.readouterr().out.strip()
-    assert line.startswith("500/1,000 steps") and "return(last 20) 15.0" in line and "ETA" in line
+    assert line.startswith("training: 500/1,000 steps  123 SPS  return(last 20) 15.0  ETA ")
 
     flags = ["--output-dir", str(tmp_path), "--total-timesteps", "4096", "--checkpoint-interval", "4096"]
     command = [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags]
@@ -286,7 +271,7 @@ def test_capture_video_records_the_first_sub_envs_episodes(tmp_path):
 
     args = ppo_pgg_discrete.Args(output_dir=str(tmp_path), total_timesteps=512, checkpoint_interval=512, num_envs=1,
                                  num_steps=512, capture_video=True)  # fmt: skip
-    assert ppo_pgg_discrete.check_args(args) is None
+    assert runs.argument_error(args, "discrete") is None
     run_dir = train(ppo_pgg_discrete, args)
     first = run_dir / "videos" / "rl-video-episode-0.mp4"
     events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
@@ -297,7 +282,7 @@ def test_capture_video_records_the_first_sub_envs_episodes(tmp_path):
 
 
 def test_capture_video_without_a_renderer_is_one_line(tmp_path):
-    proc = run_script(
+    proc = run_training(
         "continuous", "--env-id", "Hopper-v4", "--capture-video", "--output-dir", str(tmp_path / "runs"),
         env=dict(os.environ, MUJOCO_GL="no-such-backend"),
     )  # fmt: skip
@@ -338,3 +323,121 @@ def test_kl_statistics_cover_kept_rows_only(kind):
     assert abs(stats["losses/approx_kl"].item()) < 1e-6 and abs(stats["losses/old_approx_kl"].item()) < 1e-5
     assert stats["losses/clipfrac"].item() == 0.0
     assert stats["pgg/dropped_abs_logratio"].item() > 0.05 and stats["pgg/dropped_fraction"].item() == drop_mask.float().mean()
+
+
+# --- faults a newcomer found ---------------------------------------------------------------------
+
+
+def launch(module, args, capsys) -> tuple[int, list[str]]:
+    """A training script's main after parsing, in this process: (exit status, stderr lines)."""
+    try:
+        runs.launch(args, module.ACTION_SPACE, module.__file__, module.train)
+        code = 0
+    except SystemExit as e:
+        code = e.code
+    return code, capsys.readouterr().err.strip().splitlines()
+
+
+def test_a_task_whose_state_holds_numpy_scalars_writes_checkpoints_that_load_and_resume(tmp_path):
+    """MountainCar keeps its state as a tuple of np.float64, which a weights-only checkpoint cannot
+    hold as such; stopped and resumed, the run still ends on the uninterrupted run's bits."""
+    args = small_args("discrete", tmp_path, env_id="MountainCar-v0", run_name="straight")
+    straight = train(ppo_pgg_discrete, args)
+    ppo_pgg_discrete.load_checkpoint(runs.checkpoint_path(straight, 512))
+    stopped = tmp_path / "stopped"
+    shutil.copytree(straight, stopped)
+    for later in (1024, 1536):
+        runs.checkpoint_path(stopped, later).unlink()
+    train(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True))
+    a, b = checkpoint(straight, 1536), checkpoint(stopped, 1536)
+    assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
+
+
+def test_a_checkpoint_that_would_not_load_back_stops_the_run_at_the_first_one(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr(runs, "pickle_free", lambda value: value)  # numpy arrays go in as they are
+    code, error = launch(ppo_pgg_discrete, small_args("discrete", tmp_path), capsys)
+    assert code == 1 and len(error) == 1 and "step_000000512.pt" in error[0] and "would not load back" in error[0]
+    assert not list(tmp_path.rglob("step_*.pt")) and not list(tmp_path.rglob("*.tmp"))
+
+
+@pytest.mark.parametrize("kind,flags", [("discrete", ["--num-steps", "1"]), ("continuous", ["--num-minibatches", "2048"])])
+def test_minibatches_too_small_to_normalise_advantages_are_refused(kind, flags, tmp_path):
+    line = one_line_error(run_training(kind, "--output-dir", str(tmp_path / "runs"), *flags))
+    assert "cannot normalise advantages" in line and "--no-norm-adv" in line
+    assert not (tmp_path / "runs").exists()
+
+
+def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_finite_checkpoints(tmp_path, monkeypatch, capsys):
+    real_update, calls = ppo_pgg_discrete.ppo_update, []
+
+    def diverges_at_the_third(agent, *rest, **kwargs):
+        stats = real_update(agent, *rest, **kwargs)
+        calls.append(1)
+        if len(calls) == 3:
+            with torch.no_grad():
+                agent.actor[0].weight[0, 0] = float("nan")
+        return stats
+
+    monkeypatch.setattr(ppo_pgg_discrete, "ppo_update", diverges_at_the_third)
+    args = small_args("discrete", tmp_path)
+    code, error = launch(ppo_pgg_discrete, args, capsys)
+    assert code == 1 and len(error) == 1, error
+    assert "iteration 3 (global step 768): non-finite weights; checkpoints up to step_000000512.pt are kept" in error[0]
+    run_dir = tmp_path / runs.default_run_name(args)
+    assert [p.name for p in runs.checkpoints_of(run_dir)] == ["step_000000512.pt"]
+    # A checkpoint with non-finite weights (from elsewhere) is never continued.
+    ckpt = checkpoint(run_dir, 512)
+    ckpt["model"]["null_obs"][0] = float("nan")
+    torch.save(ckpt, runs.checkpoint_path(run_dir, 512))
+    with pytest.raises(runs.RunDirError, match="non-finite weights"):
+        prepare(ppo_pgg_discrete, replace(args, resume=True))
+
+
+def test_resume_sets_an_unreadable_last_checkpoint_aside_and_continues_from_the_one_before(tmp_path, capsys):
+    args = small_args("discrete", tmp_path, run_name="straight")
+    straight = train(ppo_pgg_discrete, args)
+    stopped = tmp_path / "stopped"
+    shutil.copytree(straight, stopped)
+    runs.checkpoint_path(stopped, 1536).unlink()
+    truncated = runs.checkpoint_path(stopped, 1024)
+    truncated.write_bytes(truncated.read_bytes()[:1000])
+    with pytest.raises(runs.RunDirError, match="pass --resume to continue from the last readable checkpoint"):
+        prepare(ppo_pgg_discrete, replace(args, run_name="stopped"))
+    code, error = launch(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True), capsys)
+    assert code == 0 and any("set aside step_000001024.pt.unreadable" in line for line in error)
+    assert (truncated.parent / "step_000001024.pt.unreadable").exists()  # kept, not deleted
+    a, b = checkpoint(straight, 1536), checkpoint(stopped, 1536)
+    assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
+
+
+def test_resuming_a_finished_run_touches_none_of_its_files(tmp_path):
+    args = small_args("discrete", tmp_path, total_timesteps=512)
+    run_dir = train(ppo_pgg_discrete, args)
+    before = {path: path.read_bytes() for path in run_dir.rglob("*") if path.is_file() and path.name != ".lock"}
+    proc = run_training("discrete", "--output-dir", str(tmp_path), "--run-name", run_dir.name, "--total-timesteps", "512",
+                        "--checkpoint-interval", "512", "--num-steps", "64", "--guidance", "1.1", "--cond-dropout", "0.1",
+                        "--resume", "--torch-threads", "2")  # fmt: skip
+    assert proc.returncode == 0 and "nothing to train" in proc.stdout, proc.stderr
+    assert {path: path.read_bytes() for path in before} == before
+
+
+@pytest.mark.parametrize("name", ["../escape", "/tmp/absolute", ".", "..", "a/b", ""])
+def test_a_run_name_is_one_path_component(name, tmp_path):
+    line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path / "runs"), "--run-name", name))
+    assert "--run-name must be one path component" in line
+    assert not list(tmp_path.iterdir()) and not Path("/tmp/absolute").exists()
+
+
+@pytest.mark.parametrize("env_id,space", [("FrozenLake-v1", "Discrete"), ("Blackjack-v1", "Tuple")])
+def test_a_task_without_a_vector_observation_is_refused_before_touching_the_disk(env_id, space, tmp_path):
+    line = one_line_error(run_training("discrete", "--env-id", env_id, "--output-dir", str(tmp_path / "runs")))
+    assert f"{space} observation space" in line and not (tmp_path / "runs").exists()
+
+
+def test_target_kl_with_every_row_dropped_is_refused(tmp_path):
+    line = one_line_error(run_training("discrete", "--cond-dropout", "1", "--target-kl", "0.01", "--output-dir", str(tmp_path)))
+    assert "--target-kl never triggers with --cond-dropout 1" in line
+
+
+def test_an_eta_reads_in_minutes_and_seconds():
+    assert [progress.format_duration(s) for s in (100, 3599, 3600, 7325)] == ["1m40s", "59m59s", "1h00m", "2h02m"]
