@@ -3,16 +3,20 @@
     python plot_results.py sweeps/discrete --runs runs/discrete --compare-paper --output results/discrete
 
 Reads the episodes.csv of one or more sweeps (eval_gamma_sweep.py) and, with --runs, the runs'
-TensorBoard events. Every statistic is the one of eval_gamma_sweep.mean_ci95: per training seed the
+TensorBoard events. Every statistic is the one of pgg_utils.stats.mean_ci95: per training seed the
 mean return over the evaluation episodes, then across seeds the mean and a Student-t 95% confidence
-interval. Tables and figures show the same numbers.
+interval. Tables and figures show the same numbers. The report against the paper and CleanRL is
+pgg_utils.agreement's.
 
 Configurations are never pooled. A sweep's `config` column names the training configuration (the
 variant followed by the training arguments that differ from the defaults, e.g. `ppo mujoco=2.3.7`);
-CSVs without it count as config = variant. Where one env and variant hold one configuration, tables
-and figures show the variant under the paper's name; where they hold several, each is its own row or
-series, labelled by the part of the configuration that differs. Two runs of one configuration with
-the same seed, or one cell in two CSVs, are an error naming both.
+CSVs without it count as config = variant. A configuration is that label with the exact training
+guidance and dropout of its rows (the label rounds them to 6 digits). Where one env and variant hold
+one configuration, tables and figures show the variant under the paper's name; where they hold
+several, each is its own row or series, labelled by the part of the configuration that differs. Two
+runs of one configuration with the same seed, or one cell in two CSVs, are an error naming both. An
+env's table (discrete or continuous) is its rows' `action_space`, or where a CSV lacks that column,
+the action space of the task itself.
 
 Writes into --output (and prints each path):
   table_<kind>.md / .tex        the paper's appendix layout: per checkpoint step a PPO row (eval γ=1)
@@ -35,9 +39,14 @@ Writes into --output (and prints each path):
                                 behind it, and which cells come from it
   controls.md                   when the sweeps hold several evaluation modes (--deterministic,
                                 --uniform-null): the modes side by side, cell by cell
+  outputs.txt                   the files above that this run wrote. A rerun into the same folder
+                                removes those the previous run listed and it did not write again (a
+                                previous grid's figures), and no other file
 """
 
 import csv
+import io
+import itertools
 import json
 import math
 import os
@@ -49,61 +58,33 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import matplotlib.ticker  # noqa: E402
-import numpy as np  # noqa: E402
-import tyro  # noqa: E402
-from scipy import stats  # noqa: E402
+import matplotlib.pyplot as plt
+import matplotlib.ticker
+import numpy as np
+import tyro
+from scipy import stats
 
-from pgg_utils.arguments import RUN_ONLY_ARGS  # noqa: E402
-
-
-
-def mean_ci95(values):
-    """eval_gamma_sweep.mean_ci95, imported when first needed: the sweep module pulls in torch and the
-    training scripts, which a usage error should not wait for."""
-    from eval_gamma_sweep import mean_ci95 as sweep_mean_ci95
-
-    return sweep_mean_ci95(values)
-
-
-def variant_label(train_guidance: float, cond_dropout: float) -> str:
-    from eval_gamma_sweep import variant_label as sweep_variant_label
-
-    return sweep_variant_label(train_guidance, cond_dropout)
-
+from pgg_utils.agreement import REFERENCE_MUJOCO, compare_with_paper, comparison_markdown, series_id, step_label
+from pgg_utils.arguments import RUN_ONLY_ARGS
+from pgg_utils.files import InputError, read_csv, write_atomic
+from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id
+from pgg_utils.stats import mean_ci95
 
 ROOT = Path(__file__).resolve().parent
-PAPER_DATA = ROOT / "data" / "paper_results.csv"
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
                     "null_branch", "seed", "return"}  # fmt: skip
-PAPER_METHOD_OF_VARIANT = {"ppo": ("ppo", ""), "pgg_g1.1": ("pgg", "1.1")}
-# The paper's figure layouts: its envs in its (alphabetical) order; continuous figures are 2×3 with
-# every task, one figure per training variant.
-PAPER_ENVS = {
-    "discrete": ("Acrobot-v1", "CartPole-v1"),
-    "continuous": ("HalfCheetah-v4", "Hopper-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4"),
-}
-PAPER_VARIANTS = ("ppo", "pgg_g1.1", "pgg_drop0.1")
-PAPER_SEEDS = 5  # the paper's "mean ± 95% CI" is over 5 seeds (see the README's "The statistic")
+KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
+# The paper's figure layouts: its envs in its (alphabetical) order, PAPER_ENVS; continuous figures
+# are 2×3 with every task, one figure per training variant, in the paper's order.
+PAPER_VARIANTS = tuple(VARIANTS)
 # The possible return of a task, where it has one: axes never extend past it.
 RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
                 "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
-REFERENCE_MUJOCO = "2.3.7"  # the physics the v4 tasks were written for; other versions are marked
-# CleanRL's published PPO benchmark (docs.cleanrl.dev, rl-algorithms/ppo: ppo.py on classic control,
-# ppo_continuous_action.py on MuJoCo v4, tag pr-424). Its protocol: per run the mean of the last 100
-# *training* episodes' returns at the end of training (500k steps classic control, 1M MuJoCo), then
-# mean ± standard deviation over 3 seeds (openrlbenchmark's rlops: numpy std, ddof = 0).
-CLEANRL_PPO = {"CartPole-v1": (490.04, 6.12), "Acrobot-v1": (-86.36, 1.32), "Hopper-v4": (2382.86, 271.74),
-               "HalfCheetah-v4": (1442.64, 46.03), "Walker2d-v4": (2287.95, 571.78),
-               "InvertedPendulum-v4": (963.09, 22.20), "Humanoid-v4": (716.11, 49.08), "Pusher-v4": (-40.38, 7.15)}  # fmt: skip
-CLEANRL_SEEDS = 3
-CLEANRL_STEPS = {"discrete": 500_000, "continuous": 1_000_000}
-ALPHA = 0.05
-# Run arguments that do not change what is trained (or only its bits), and the seed: never part of a
-# configuration. The training scripts name the former.
+# Run arguments that do not change what is trained (or only its bits; pgg_utils.arguments names them),
+# and the seed: never part of a configuration.
 NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 MARKERS = "osD^vPX*hp<>"
+MANIFEST = "outputs.txt"
 
 
 @dataclass
@@ -130,10 +111,6 @@ class Args:
 
 USAGE = ("usage: plot_results.py SWEEP [SWEEP ...] [--output DIR] [--runs RUN ...] [--compare-paper] "
          "[--provenance CSV]; SWEEP is a sweep directory holding episodes.csv, or an episodes CSV")  # fmt: skip
-
-
-class InputError(Exception):
-    """Bad input: reported as one line, exit status 2."""
 
 
 # --- arguments, checked up front ------------------------------------------------------------------
@@ -192,7 +169,7 @@ def check_writable(output: Path) -> None:
 
 def read_episodes(paths) -> list[dict]:
     """Every episode row of the given sweeps, each with its `config` (the variant where the CSV has no
-    such column) and `_source` (the CSV it came from)."""
+    such column), `kind` (the table its env belongs to) and `_source` (the CSV it came from)."""
     rows = []
     for raw in paths:
         path = sweep_csv(raw)
@@ -207,32 +184,65 @@ def read_episodes(paths) -> list[dict]:
                 raise InputError(f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?")
             for row in reader:
                 row["config"] = row.get("config") or row["variant"]
+                row["kind"] = kind_of(row, path)
                 row["_source"] = str(path)
                 rows.append(row)
+    check_one_kind(rows)
     check_not_pooled(rows)
     return rows
 
 
+def kind_of(row: dict, path: Path) -> str:
+    """The table a row belongs to, discrete or continuous: the action space its sweep recorded, else
+    the task's own (pgg_utils.paper.action_kind), never a guess from the env's name."""
+    recorded = row.get("action_space")
+    if recorded:
+        if recorded not in KINDS:
+            raise InputError(f"{path}: action_space {recorded!r} of {row['env_id']} is neither discrete nor continuous")
+        return recorded
+    try:
+        return action_kind(row["env_id"])
+    except ValueError as e:
+        raise InputError(f"{path} records no action_space for {row['env_id']}, and {e}") from None
+
+
+def check_one_kind(rows: list[dict]) -> None:
+    """An env belongs to one table: CSVs that disagree on its action space cannot both be right."""
+    first = {}  # env -> (kind, source)
+    for row in rows:
+        kind, source = first.setdefault(row["env_id"], (row["kind"], row["_source"]))
+        if kind != row["kind"]:
+            raise InputError(f"{row['env_id']} has {kind} actions in {source} and {row['kind']} actions in "
+                             f"{row['_source']}")
+
+
+def configuration(row: dict) -> tuple:
+    """(env, variant, config, training guidance, dropout): a row's whole configuration, exactly. The
+    variant and config label alone round guidance and dropout to 6 digits (variant_id's %g)."""
+    return (row["env_id"], row["variant"], row["config"], float(row["train_guidance"]), float(row["cond_dropout"]))
+
+
 def check_not_pooled(rows: list[dict]) -> None:
     """A cell's seeds must be distinct runs of one configuration, and each episode must be counted once."""
-    runs = defaultdict(dict)  # (env, config, seed) -> {run: source}
+    runs = defaultdict(dict)  # (configuration, seed) -> {run: source}
     episodes = {}
     for row in rows:
         run, source = row.get("run", ""), row["_source"]
-        owners = runs[(row["env_id"], row["config"], row["seed"])]
+        owners = runs[(*configuration(row), row["seed"])]
         owners.setdefault(run, source)
         if len(owners) > 1:
             (run_a, source_a), (run_b, source_b) = list(owners.items())[:2]
             raise InputError(f"two runs of configuration '{row['config']}' on {row['env_id']} with seed {row['seed']}: "
                              f"{run_a} ({source_a}) and {run_b} ({source_b}); give them different configs or sweep "
                              "them apart")  # fmt: skip
-        key = (row["env_id"], row["config"], row["seed"], run, row["step"], row["eval_guidance"], row["policy"],
-               row["null_branch"], row.get("episode", ""))  # fmt: skip
+        episode = row.get("episode", "")
+        key = (*configuration(row), row["seed"], run, row["step"], row["eval_guidance"], row["policy"],
+               row["null_branch"], episode)  # fmt: skip
         if key in episodes:
             first = episodes[key]
             where = f"both {first} and {source}" if first != source else f"{source} twice"
-            raise InputError(f"episode {key[8]} of run {run} at step {row['step']}, γ {row['eval_guidance']} appears in "
-                             f"{where}; pass each sweep once")  # fmt: skip
+            raise InputError(f"episode {episode} of run {run} at step {row['step']}, γ {row['eval_guidance']} "
+                             f"appears in {where}; pass each sweep once")
         episodes[key] = source
 
 
@@ -249,19 +259,19 @@ def config_tokens(config: str) -> dict:
 
 
 def config_labels(pairs) -> dict:
-    """{(env, variant, config, source-set)} -> the label that tells configs of one env and variant apart:
-    "" where the env and variant have one config, else the arguments whose values differ
-    (`key=default` where a config does not set one), with the source folder added where that is
-    still ambiguous."""
+    """{(env, variant, config, guidance, dropout, source-set)} -> the label that tells configurations of
+    one env and variant apart: "" where the env and variant have one, else the arguments whose values
+    differ (`key=default` where a config does not set one; guidance and dropout exactly), with the
+    source folder added where that is still ambiguous."""
     groups = defaultdict(dict)
-    for env, variant, config, sources in pairs:
-        groups[(env, variant)][config] = sources
+    for env, variant, config, guidance, dropout, sources in pairs:
+        groups[(env, variant)][(config, guidance, dropout)] = sources
     labels = {}
     for (env, variant), configs in groups.items():
         if len(configs) == 1:
-            labels.update({(env, variant, c): "" for c in configs})
+            labels.update({(env, variant, *c): "" for c in configs})
             continue
-        tokens = {c: config_tokens(c) for c in configs}
+        tokens = {c: config_tokens(c[0]) | {"guidance": repr(c[1]), "cond_dropout": repr(c[2])} for c in configs}
         keys = sorted({k for t in tokens.values() for k in t})
         differing = [k for k in keys if len({t.get(k) for t in tokens.values()}) > 1]
         named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in differing) for c in configs}
@@ -269,39 +279,44 @@ def config_labels(pairs) -> dict:
             if not named[c] or list(named.values()).count(named[c]) > 1:
                 folders = sorted({Path(s).parent.name or s for s in configs[c]})
                 named[c] = " ".join(filter(None, [named[c], f"from {', '.join(folders)}"]))
-            labels[(env, variant, c)] = named[c]
+            labels[(env, variant, *c)] = named[c]
     return labels
 
 
 def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
-    """One row per (env, config, step, γ, policy, null branch): statistics over seeds of the per-seed
-    mean episodic return, with the configuration's label (`series`) and MuJoCo version."""
+    """One row per (configuration, step, γ, policy, null branch): statistics over seeds of the per-seed
+    mean episodic return, with the configuration's label (`series`), its table (`kind`) and MuJoCo
+    version."""
     per_seed = defaultdict(lambda: defaultdict(list))
     sources = defaultdict(set)
+    kinds = {}
     for row in rows:
-        key = (row["env_id"], row["variant"], row["config"], int(row["step"]), float(row["eval_guidance"]),
-               row["policy"], row["null_branch"])  # fmt: skip
+        config = configuration(row)
+        key = (*config, int(row["step"]), float(row["eval_guidance"]), row["policy"], row["null_branch"])
         per_seed[key][int(row["seed"])].append(float(row["return"]))
-        sources[key[:3]].add(row["_source"])
-    labels = config_labels((*k, frozenset(s)) for k, s in sources.items())
+        sources[config].add(row["_source"])
+        kinds[row["env_id"]] = row["kind"]
+    labels = config_labels((*c, frozenset(s)) for c, s in sources.items())
     out = []
-    for key in sorted(per_seed, key=lambda k: (k[0], variant_rank(k[1]), k[1], k[2], k[3], k[4], k[5], k[6])):
-        env, variant, config, step, gamma, policy, null_branch = key
+    for key in sorted(per_seed, key=lambda k: (k[0], variant_rank(k[1]), *k[1:])):
+        env, variant, config, guidance, dropout, step, gamma, policy, null_branch = key
         seed_means = [float(np.mean(v)) for _, v in sorted(per_seed[key].items())]
         mean, half, _, _ = mean_ci95(seed_means)
         out.append({
-            "env_id": env, "variant": variant, "config": config, "series": labels[(env, variant, config)],
+            "env_id": env, "variant": variant, "config": config, "train_guidance": guidance, "cond_dropout": dropout,
+            "kind": kinds[env], "series": labels[key[:5]],
             "step": step, "eval_guidance": gamma, "policy": policy, "null_branch": null_branch,
             "n_seeds": len(seed_means), "n_episodes": sum(len(v) for v in per_seed[key].values()),
             "mean": mean, "ci95": half, "sd": float(np.std(seed_means, ddof=1)) if len(seed_means) > 1 else math.nan,
             "seed_means": ";".join(f"{m:.4f}" for m in seed_means), "seeds": sorted(per_seed[key]),
-            "mujoco": mujoco_of(env, config, sources[key[:3]], provenance), "sources": sorted(sources[key[:3]]),
+            "mujoco": mujoco_of(env, config, sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
         })  # fmt: skip
     return out
 
 
 def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
-    if kind_of(env) != "continuous":
+    """The MuJoCo version behind a MuJoCo task's cells: its config's `mujoco=`, else its CSVs' provenance."""
+    if not is_mujoco(env):
         return ""
     if "mujoco" in config_tokens(config):
         return config_tokens(config)["mujoco"]
@@ -313,29 +328,8 @@ def variant_rank(variant: str) -> int:
     return PAPER_VARIANTS.index(variant) if variant in PAPER_VARIANTS else len(PAPER_VARIANTS)
 
 
-def paper_name(variant: str) -> str:
-    """The paper's name of a variant: ppo -> PPO, pgg_g1.1 -> PGG, γ_train = 1.1, pgg_drop0.1 -> PGG, dropout 0.1."""
-    if variant == "ppo":
-        return "PPO"
-    if not variant.startswith("pgg_"):
-        return variant
-    parts = []
-    for part in variant[4:].split("_"):
-        if part.startswith("g"):
-            parts.append(f"γ_train = {part[1:]}")
-        elif part.startswith("drop"):
-            parts.append(f"dropout {part[4:]}")
-        else:
-            parts.append(part)
-    return "PGG, " + ", ".join(parts)
-
-
 def series_name(variant: str, series: str) -> str:
     return paper_name(variant) + (f" [{series}]" if series else "")
-
-
-def series_id(variant: str, series: str) -> str:
-    return variant + (f" [{series}]" if series else "")
 
 
 def ordered_series(summary, variant: str | None = None) -> list[tuple[str, str]]:
@@ -351,8 +345,7 @@ def read_provenance(path: str | None) -> dict:
     mujoco, machine and optional notes."""
     if path is None:
         return {}
-    with open(path, newline="") as f:
-        rows = list(csv.DictReader(f))
+    rows = read_csv(path)
     if not rows or "csv" not in rows[0]:
         raise InputError(f"{path} lacks a csv column; see results/provenance.csv")
     return {str((ROOT / r["csv"]).resolve()): r for r in rows}
@@ -371,9 +364,9 @@ def provenance_markdown(episodes: list[dict], provenance: dict) -> str:
         entry["seeds"].add(int(row["seed"]))
         entry["modes"].add(f"{row['policy']}/{row['null_branch']}")
         entry["rows"] += 1
-    lines = ["# Provenance", "", "Every cell of the tables and figures beside this file comes from one of these CSVs "
-             "(committed in this repository). `commits`: the commits that wrote the CSV "
-             "(`git log --format=%h -- CSV`, newest first).", "",
+    lines = ["# Provenance", "", ("Every cell of the tables and figures beside this file comes from one of these CSVs "
+                                  "(committed in this repository). `commits`: the commits that wrote the CSV "
+                                  "(`git log --format=%h -- CSV`, newest first)."), "",
              "| CSV | envs | configs | seeds | evaluation | episodes | commits | MuJoCo | machine | notes |",
              "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for source, e in sorted(per_source.items(), key=lambda kv: relative(kv[0])):
@@ -412,11 +405,6 @@ def controls_table(summary_all: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def kind_of(env_id: str) -> str:
-    """Groups envs into the paper's two tables: the MuJoCo tasks are the -v4/-v5 ones."""
-    return "continuous" if env_id.endswith(("-v4", "-v5")) else "discrete"
-
-
 def cell_index(summary: list[dict]) -> dict:
     """(env, variant, series, step, eval γ) -> summary row."""
     return {(r["env_id"], r["variant"], r["series"], int(r["step"]), float(r["eval_guidance"])): r for r in summary}
@@ -433,10 +421,6 @@ def fmt_cell(row: dict | None, latex: bool) -> str:
     text = f"{mean:.1f}" if math.isnan(ci) else (f"{mean:.1f} \\pm {ci:.1f}" if latex else f"{mean:.1f} ± {ci:.1f}")
     mark = ("^\\dagger" if latex else "†") if other_mujoco(row) else ""
     return f"${text}{mark}$" if latex else text + mark
-
-
-def step_label(step: int) -> str:
-    return f"{step // 1_000_000}M" if step % 1_000_000 == 0 else f"{step // 1000}k"
 
 
 def gamma_label(gamma: float, latex: bool) -> str:
@@ -486,7 +470,7 @@ def table_notes(summary, envs, latex: bool, paper_layout: bool = True) -> list[s
         rest = f"; the other cells MuJoCo {', '.join(recorded)}" if recorded else ""
         dagger = "$^\\dagger$" if latex else "†"
         notes.append(f"{dagger} from a MuJoCo other than {REFERENCE_MUJOCO}: {where}{rest}.")
-    kind = kind_of(envs[0]) if envs else "discrete"
+    kind = summary[0]["kind"] if summary else "discrete"
     missing = [e for e in PAPER_ENVS.get(kind, ()) if e not in envs]
     if missing and kind == "continuous" and paper_layout:
         notes.append(f"Not run: {', '.join(missing)}.")
@@ -525,11 +509,9 @@ def latex_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) -> 
     ])  # fmt: skip
 
 
-def write(path: Path, text: str, written: list) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+def write(path: Path, data: str | bytes, written: list) -> None:
+    """Writes one output atomically (a complete file or none) and records it in `written`."""
+    write_atomic(path, data)
     written.append(path)
 
 
@@ -549,11 +531,12 @@ def csv_value(value) -> str:
 
 
 def save_figure(fig, stem: Path, written: list) -> None:
-    stem.parent.mkdir(parents=True, exist_ok=True)
-    for suffix in (".png", ".pdf"):
-        path = stem.parent / (stem.name + suffix)  # not with_suffix: "pgg_g1.1" would lose ".1"
-        fig.savefig(path, dpi=200, bbox_inches="tight", metadata={"CreationDate": None} if suffix == ".pdf" else None)
-        written.append(path)
+    """`stem`.png and `stem`.pdf (not with_suffix: "pgg_g1.1" would lose ".1"), rendered in memory and
+    written atomically like every other output; the PDF without a date, so that it regenerates bit for bit."""
+    for image_format, metadata in (("png", None), ("pdf", {"CreationDate": None})):
+        image = io.BytesIO()
+        fig.savefig(image, format=image_format, dpi=200, bbox_inches="tight", metadata=metadata)
+        write(stem.parent / f"{stem.name}.{image_format}", image.getvalue(), written)
     plt.close(fig)
 
 
@@ -801,7 +784,7 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
         if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
             continue
         events = accumulator.Scalars("charts/episodic_return")
-        variant = variant_label(run_args["guidance"], run_args["cond_dropout"])
+        variant = variant_id(run_args["guidance"], run_args["cond_dropout"])
         runs.append((run_args, variant, np.array([e.step for e in events]), np.array([e.value for e in events])))
         run_dirs.append(args_file.parent)
     if not runs:
@@ -827,7 +810,7 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
                 continue
             edges = np.linspace(0, max(s.max() for s, _ in seeds) + 1, bins + 1)
             per_seed = np.array([[r[(s >= lo) & (s < hi)].mean() if ((s >= lo) & (s < hi)).any() else np.nan
-                                  for lo, hi in zip(edges[:-1], edges[1:])] for s, r in seeds])  # fmt: skip
+                                  for lo, hi in itertools.pairwise(edges)] for s, r in seeds])  # fmt: skip
             centres = (edges[:-1] + edges[1:]) / 2
             present = ~np.isnan(per_seed).all(axis=0)
             stats_per_bin = [mean_ci95(col[~np.isnan(col)]) for col in per_seed.T[present]]
@@ -908,293 +891,6 @@ def aggregate_iqm(summary) -> list[dict]:
     return out
 
 
-# --- agreement with the paper ---------------------------------------------------------------------
-
-
-def sd_from_ci(ci95: float, n: int) -> float:
-    """The sample standard deviation behind a Student-t 95% CI half-width over n values."""
-    return ci95 * math.sqrt(n) / float(stats.t.ppf(0.975, n - 1))
-
-
-def welch(mean1: float, sd1: float, n1: int, mean2: float, sd2: float, n2: int) -> tuple[float, float, float]:
-    """(t, degrees of freedom, two-sided p) of Welch's t test from summary statistics. With no spread on
-    either side the difference is certain: p = 1 if the means are equal, else 0."""
-    if n1 < 2 or n2 < 2 or math.isnan(sd1) or math.isnan(sd2):
-        return math.nan, math.nan, math.nan
-    v1, v2 = sd1**2 / n1, sd2**2 / n2
-    diff = mean1 - mean2
-    if v1 + v2 == 0:
-        return (0.0 if diff == 0 else math.copysign(math.inf, diff)), math.nan, (1.0 if diff == 0 else 0.0)
-    t_value = diff / math.sqrt(v1 + v2)
-    df = (v1 + v2) ** 2 / (v1**2 / (n1 - 1) + v2**2 / (n2 - 1))
-    return t_value, df, float(2 * stats.t.sf(abs(t_value), df))
-
-
-def hedges_g(mean1: float, sd1: float, n1: int, mean2: float, sd2: float, n2: int) -> float:
-    """Standardised difference (mean1 − mean2) / pooled sd, with Hedges' small-sample correction."""
-    if n1 < 2 or n2 < 2 or math.isnan(sd1) or math.isnan(sd2):
-        return math.nan
-    pooled = math.sqrt(((n1 - 1) * sd1**2 + (n2 - 1) * sd2**2) / (n1 + n2 - 2))
-    diff = mean1 - mean2
-    if pooled == 0:
-        return 0.0 if diff == 0 else math.copysign(math.inf, diff)
-    return (1 - 3 / (4 * (n1 + n2) - 9)) * diff / pooled
-
-
-def holm(p_values: list[float]) -> list[float]:
-    """Holm's step-down adjusted p-values (family-wise error), NaNs left out of the family and kept."""
-    indexed = sorted((p, i) for i, p in enumerate(p_values) if not math.isnan(p))
-    m = len(indexed)
-    adjusted = [math.nan] * len(p_values)
-    running = 0.0
-    for rank, (p, i) in enumerate(indexed):
-        running = max(running, min(1.0, (m - rank) * p))
-        adjusted[i] = running
-    return adjusted
-
-
-def correct_family(rows: list[dict]) -> None:
-    """Sets each row's `p_holm` and `significant` from Holm's correction over these rows' `p`."""
-    for row, adjusted in zip(rows, holm([row["p"] for row in rows])):
-        row["p_holm"] = adjusted
-        row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < ALPHA)
-
-
-def sign_test(differences) -> tuple[int, int, int, float]:
-    """(above, below, ties, two-sided exact binomial p) of the signs of ours − reference."""
-    above = sum(d > 0 for d in differences)
-    below = sum(d < 0 for d in differences)
-    ties = len(differences) - above - below
-    p = float(stats.binomtest(above, above + below, 0.5).pvalue) if above + below else math.nan
-    return above, below, ties, p
-
-
-def null_rates(n: int = PAPER_SEEDS, draws: int = 200_000, shifts=(0.0, 1.0, 2.0), seed: int = 0) -> list[dict]:
-    """Simulated, for two samples of n normal values whose means differ by `shift` standard deviations:
-    how often their t 95% CIs overlap, and how often Welch's test rejects at 5%."""
-    rng = np.random.default_rng(seed)
-    t_crit = float(stats.t.ppf(0.975, n - 1))
-    out = []
-    for shift in shifts:
-        a = rng.standard_normal((draws, n))
-        b = rng.standard_normal((draws, n)) + shift
-        ma, mb, sa, sb = a.mean(1), b.mean(1), a.std(1, ddof=1), b.std(1, ddof=1)
-        overlap = np.abs(ma - mb) <= t_crit * (sa + sb) / math.sqrt(n)
-        va, vb = sa**2 / n, sb**2 / n
-        t_value = (ma - mb) / np.sqrt(va + vb)
-        df = (va + vb) ** 2 / (va**2 / (n - 1) + vb**2 / (n - 1))
-        p = 2 * stats.t.sf(np.abs(t_value), df)
-        out.append({"shift_sd": shift, "overlap": float(overlap.mean()), "welch_reject": float((p < ALPHA).mean())})
-    return out
-
-
-def our_sd(row: dict) -> float:
-    seed_means = [float(x) for x in str(row["seed_means"]).split(";") if x]
-    return float(np.std(seed_means, ddof=1)) if len(seed_means) > 1 else math.nan
-
-
-def compare_row(ours: dict, reference: str, ref_mean: float, ref_ci: float, ref_sd: float, ref_n: int) -> dict:
-    n = int(ours["n_seeds"])
-    sd = our_sd(ours)
-    mean, ci = float(ours["mean"]), float(ours["ci95"])
-    t_value, df, p = welch(mean, sd, n, ref_mean, ref_sd, ref_n)
-    diff = mean - ref_mean
-    overlap = "n/a" if math.isnan(ci) else str(abs(diff) <= ci + ref_ci)
-    return {"env_id": ours["env_id"], "variant": ours["variant"], "config": ours["config"], "series": ours["series"],
-            "mujoco": ours.get("mujoco", ""), "step": int(ours["step"]), "eval_guidance": float(ours["eval_guidance"]),
-            "reference": reference, "ref_mean": ref_mean, "ref_ci95": ref_ci, "ref_sd": ref_sd, "ref_n": ref_n,
-            "our_mean": mean, "our_ci95": ci, "our_sd": sd, "our_n": n, "diff": diff,
-            "diff_pct": 100 * diff / abs(ref_mean) if ref_mean else math.nan, "welch_t": t_value, "welch_df": df,
-            "p": p, "p_holm": math.nan, "significant": "", "hedges_g": hedges_g(mean, sd, n, ref_mean, ref_sd, ref_n),
-            "ci_overlap": overlap}  # fmt: skip
-
-
-def compare_with_paper(summary) -> list[dict]:
-    """Our cells beside the paper's, each tested (Welch, Holm over the cells of one of the paper's
-    tables, i.e. per kind), and our final PPO cells beside CleanRL's published PPO (Holm over those)."""
-    with open(PAPER_DATA, newline="") as f:
-        paper = list(csv.DictReader(f))
-    paper_envs = {p["env_id"] for p in paper}
-    swept = {r["env_id"] for r in summary}
-    absent = sorted(swept - paper_envs)
-    for env in absent:
-        print(f"note: {env} is not in the paper's tables; left out of the comparison", file=sys.stderr)
-    if len(absent) == len(swept):
-        raise InputError(f"none of the swept envs ({', '.join(absent)}) is in the paper's tables")
-    paper_cells = {(p["env_id"], p["method"], p["train_guidance"], int(p["step"]), float(p["eval_guidance"])): p for p in paper}
-    out = []
-    for r in summary:
-        if r["variant"] not in PAPER_METHOD_OF_VARIANT:
-            continue
-        method, train_guidance = PAPER_METHOD_OF_VARIANT[r["variant"]]
-        p = paper_cells.get((r["env_id"], method, train_guidance, int(r["step"]), float(r["eval_guidance"])))
-        if p is not None:
-            ci = float(p["ci95"])
-            out.append(compare_row(r, "paper", float(p["mean"]), ci, sd_from_ci(ci, PAPER_SEEDS), PAPER_SEEDS))
-    for kind in ("discrete", "continuous"):
-        correct_family([row for row in out if kind_of(row["env_id"]) == kind])
-    cleanrl = []
-    for r in summary:
-        env = r["env_id"]
-        if (r["variant"] == "ppo" and env in CLEANRL_PPO and float(r["eval_guidance"]) == 1.0
-                and int(r["step"]) == CLEANRL_STEPS[kind_of(env)]):  # fmt: skip
-            mean, sd_population = CLEANRL_PPO[env]
-            sd = sd_population * math.sqrt(CLEANRL_SEEDS / (CLEANRL_SEEDS - 1))
-            ci = float(stats.t.ppf(0.975, CLEANRL_SEEDS - 1)) * sd / math.sqrt(CLEANRL_SEEDS)
-            cleanrl.append(compare_row(r, "cleanrl", mean, ci, sd, CLEANRL_SEEDS))
-    correct_family(cleanrl)
-    return out + cleanrl
-
-
-def fmt(value: float, digits: int = 1) -> str:
-    if isinstance(value, str):
-        return value
-    if math.isnan(value):
-        return "–"
-    if math.isinf(value):
-        return "∞" if value > 0 else "−∞"
-    return f"{value:.{digits}f}"
-
-
-def fmt_p(p: float) -> str:
-    if math.isnan(p):
-        return "–"
-    return "<0.001" if p < 0.001 else f"{p:.3f}"
-
-
-def p_is(p: float) -> str:
-    """"p = 0.012" or "p < 0.001"."""
-    return "p < 0.001" if fmt_p(p).startswith("<") else f"p = {fmt_p(p)}"
-
-
-def cell_name(r: dict) -> str:
-    name = "PPO" if r["variant"] == "ppo" else f"γ_train 1.1 γ={r['eval_guidance']:g}"
-    if r["series"]:
-        name += f" [{r['series']}]"
-    return f"{step_label(r['step'])} {name}"
-
-
-def env_headline(env: str, rows: list[dict], family_size: int) -> str:
-    above, below, ties, p_sign = sign_test([r["diff"] for r in rows])
-    significant = [r for r in rows if r["significant"] == "True"]
-    raw = sum(1 for r in rows if not math.isnan(r["p"]) and r["p"] < ALPHA)
-    overlap = sum(r["ci_overlap"] == "True" for r in rows)
-    pct = [abs(r["diff_pct"]) for r in rows if not math.isnan(r["diff_pct"])]
-    ratio = [r["ref_sd"] / r["our_sd"] for r in rows if r["our_sd"] and not math.isnan(r["our_sd"]) and r["ref_sd"]]
-    versions = sorted({r["mujoco"] for r in rows if r["mujoco"]})
-    stack = f" (MuJoCo {', '.join(versions)})" if versions else ""
-    text = (f"**{env}**{stack}: {len(rows)} cells; "
-            f"**{len(significant)} differ significantly after Holm**")  # fmt: skip
-    if significant:
-        text += " (" + "; ".join(f"{cell_name(r)}: {fmt(r['our_mean'])} vs {fmt(r['ref_mean'])}, {r['diff_pct']:+.0f}%, "
-                                 f"g = {fmt(r['hedges_g'])}" for r in significant) + ")"  # fmt: skip
-    text += (f"; {raw} at p < 0.05 before correction. Ours above the paper in {above}, below in {below}"
-             f"{f', tied in {ties}' if ties else ''} (sign test {p_is(p_sign)}). "
-             f"|difference| {min(pct):.0f}–{max(pct):.0f}% of the paper's mean (median {np.median(pct):.0f}%). "
-             f"CIs overlap in {overlap} of {len(rows)}.") if pct else "."  # fmt: skip
-    if ratio:
-        text += f" The paper's seed spread is {np.median(ratio):.1f}× ours (median over cells)."
-    return text
-
-
-def comparison_markdown(rows: list[dict], summary: list[dict] | None = None) -> str:
-    paper_rows = [r for r in rows if r["reference"] == "paper"]
-    cleanrl_rows = [r for r in rows if r["reference"] == "cleanrl"]
-    lines = ["# Agreement with the paper", ""]
-    families = {kind: [r for r in paper_rows if kind_of(r["env_id"]) == kind] for kind in ("discrete", "continuous")}
-    lines.append("## Headline")
-    lines.append("")
-    for kind, family in families.items():
-        if not family:
-            continue
-        n_sig = sum(r["significant"] == "True" for r in family)
-        lines.append(f"{len(family)} cells of the paper's {kind} table compared; **{n_sig} differ significantly** "
-                     f"(Welch's t, Holm-corrected over these {len(family)} cells, family-wise α = {ALPHA}).")  # fmt: skip
-        lines.append("")
-        for env in sorted({r["env_id"] for r in family}):
-            lines.append("- " + env_headline(env, [r for r in family if r["env_id"] == env], len(family)))
-        lines.append("")
-    if not paper_rows:
-        lines += ["No cell of the paper's tables was swept (its steps are 100k–500k discrete, 200k–1M continuous).", ""]
-    configs = sorted({(r["env_id"], r["variant"], r["series"]) for r in paper_rows if r["series"]})
-    if configs:
-        lines += ["Several configurations of one env and variant are compared with the paper separately: "
-                  + "; ".join(f"{e} {v} [{s}]" for e, v, s in configs) + ".", ""]  # fmt: skip
-    if cleanrl_rows:
-        lines.append("CleanRL's published PPO, a second reference (its own protocol): " + "; ".join(
-            f"{r['env_id']} ours {fmt(r['our_mean'])} vs {fmt(r['ref_mean'])} ({r['diff_pct']:+.0f}%, Holm {p_is(r['p_holm'])})"
-            for r in cleanrl_rows) + ".")  # fmt: skip
-        lines.append("")
-    short = sorted({r["env_id"] for r in summary or [] if r["env_id"] in CLEANRL_PPO and r["variant"] == "ppo"}
-                   - {r["env_id"] for r in cleanrl_rows})  # fmt: skip
-    if short:
-        lines += [f"No PPO cell at CleanRL's final step (500k classic control, 1M MuJoCo) for {', '.join(short)}; "
-                  "not compared with CleanRL.", ""]  # fmt: skip
-    lines += criteria_section()
-    lines += ["## Cells", "",
-              "Our side: the per-seed mean returns (sd over seeds, ddof 1). The paper's: sd recovered from its "
-              f"mean ± 95% CI with n = {PAPER_SEEDS} (sd = CI·√5 / t₀.₉₇₅,₄). diff = ours − paper; g = Hedges' g "
-              "(positive: ours higher). Holm: over the cells of the same table (discrete or continuous). "
-              "† MuJoCo other than 2.3.7.", "",
-              "| env | variant | step | eval γ | paper | ours | seeds | diff | diff % | Welch p | Holm p | g | CIs overlap |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for r in paper_rows:
-        mark = " ✗" if r["significant"] == "True" else ""
-        variant = series_id(r["variant"], r["series"]) + ("†" if r["mujoco"] and r["mujoco"] != REFERENCE_MUJOCO else "")
-        lines.append(f"| {r['env_id']} | {variant} | {step_label(r['step'])} | {r['eval_guidance']:g} | "
-                     f"{fmt(r['ref_mean'])} ± {fmt(r['ref_ci95'])} | {fmt(r['our_mean'])} ± {fmt(r['our_ci95'])} | "
-                     f"{r['our_n']} | {r['diff']:+.1f} | {fmt(r['diff_pct'])} | {fmt_p(r['p'])} | {fmt_p(r['p_holm'])}{mark} | "
-                     f"{fmt(r['hedges_g'], 2)} | {'yes' if r['ci_overlap'] == 'True' else 'no' if r['ci_overlap'] == 'False' else '?'} |")  # fmt: skip
-    if cleanrl_rows:
-        lines += ["", "## Second reference: CleanRL's PPO", "",
-                  "CleanRL's published end-of-training PPO returns (docs.cleanrl.dev, `ppo.py` on classic control at "
-                  "500k steps, `ppo_continuous_action.py` on MuJoCo v4 at 1M): per run the mean return of the last "
-                  "100 *training* episodes, then **mean ± standard deviation** over 3 seeds (numpy std, ddof 0; "
-                  "not a CI). Ours: vanilla PPO's final checkpoint evaluated over 50 fresh episodes per seed at γ = 1. "
-                  "The protocols differ (training episodes under the running policy vs evaluation of the final "
-                  "weights), so the test is indicative. sd in units: ours − CleanRL over CleanRL's sd (ddof 1).", "",
-                  "| env | CleanRL (mean ± sd, 3 seeds) | paper PPO, same step | ours PPO | diff % | in CleanRL sds | Welch p | Holm p |",
-                  "|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        paper_ppo = {(r["env_id"], r["step"], r["series"]): r for r in paper_rows if r["variant"] == "ppo" and r["eval_guidance"] == 1.0}
-        for r in cleanrl_rows:
-            p = paper_ppo.get((r["env_id"], r["step"], r["series"]))
-            sd_pop = CLEANRL_PPO[r["env_id"]][1]
-            paper_cell = f"{fmt(p['ref_mean'])} ± {fmt(p['ref_ci95'])}" if p else "–"
-            lines.append(f"| {r['env_id']} | {fmt(r['ref_mean'], 2)} ± {sd_pop:.2f} | "
-                         f"{paper_cell} | {fmt(r['our_mean'])} ± {fmt(r['our_ci95'])} | "
-                         f"{r['diff_pct']:+.1f} | {r['diff'] / r['ref_sd']:+.2f} | {fmt_p(r['p'])} | {fmt_p(r['p_holm'])} |")  # fmt: skip
-    return "\n".join(lines) + "\n"
-
-
-def criteria_section() -> list[str]:
-    rates = null_rates()
-    by_shift = {r["shift_sd"]: r for r in rates}
-    null = by_shift[0.0]
-    lines = ["## What each criterion can and cannot show", "",
-             f"Simulated (seeded, {200_000:,} pairs): two samples of {PAPER_SEEDS} normal values, means "
-             "`shift` standard deviations apart.", "",
-             "| true difference | 95% CIs overlap | Welch p < 0.05 |", "|---|---|---|"]  # fmt: skip
-    for r in rates:
-        lines.append(f"| {r['shift_sd']:g} sd | {100 * r['overlap']:.1f}% | {100 * r['welch_reject']:.1f}% |")
-    lines += ["",
-              f"- **CI overlap** happens {100 * null['overlap']:.1f}% of the time when both samples come from one "
-              "distribution, and still most of the time for a true difference of one standard deviation: it almost "
-              "never fails, so a cell that 'agrees' this way says little. Where one side's interval is wide (the "
-              "paper's HalfCheetah), it says nothing.",
-              f"- **Welch's t test** per cell rejects a true null {100 * null['welch_reject']:.1f}% of the time at "
-              "p < 0.05; after Holm's correction over a table of hundreds of cells, only large, clear differences "
-              "survive. A non-significant cell is *not* evidence of equality (5 seeds give little power), "
-              "only the absence of evidence of a difference; an equivalence test would need a margin the paper "
-              "does not give. Holm is valid whatever the dependence between cells.",
-              "- **The sign test** per env asks whether ours lies above the paper's as often as below. Its cells are "
-              "not independent (the same 5 checkpoints are evaluated at every eval γ, and checkpoints of one run "
-              "share its history), so its p-value overstates the evidence; read it as a description of a "
-              "systematic offset, not a test.",
-              "- **The effect size** (Hedges' g, difference as % of the paper's mean) says how large a difference "
-              "is, whatever its p-value.", ""]  # fmt: skip
-    return lines
-
-
 def simple_markdown(rows: list[dict]) -> str:
     columns = list(rows[0])
     return "\n".join(["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
@@ -1205,19 +901,37 @@ def simple_markdown(rows: list[dict]) -> str:
 
 
 def generate(args: Args) -> list[Path]:
+    """Writes every output into --output, then its manifest, and removes the files the previous run
+    listed and this one did not write. Returns the paths written. An interrupted run leaves a manifest
+    of what either run wrote, so that the next run still finds every file to remove."""
     validate(args)
     output = Path(args.output)
+    previous = read_manifest(output)
+    written: list[Path] = []
+    try:
+        write_outputs(args, output, written)
+    except BaseException:
+        if written:
+            write_manifest(output, previous | manifest_names(output, written))
+        raise
+    for path in remove_stale(output, previous - manifest_names(output, written)):
+        print(f"note: removed {path}: the previous run into {output} wrote it, this one did not", file=sys.stderr)
+    write_manifest(output, manifest_names(output, written))
+    return [*written, output / MANIFEST]
+
+
+def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
+    """The tables, figures and reports, each recorded in `written` once it is complete."""
     provenance = read_provenance(args.provenance)
     episodes = read_episodes(args.sweeps)
     summary = summarise(select_mode(episodes, args.policy, args.null_branch), provenance)
-    written: list[Path] = []
     if len({(r["policy"], r["null_branch"]) for r in episodes}) > 1:
         write(output / "controls.md", controls_table(summarise(episodes, provenance)), written)
     if args.provenance:
         write(output / "provenance.md", provenance_markdown(episodes, provenance), written)
     by_kind = defaultdict(list)
     for r in summary:
-        by_kind[kind_of(r["env_id"])].append(r)
+        by_kind[r["kind"]].append(r)
     for kind, rows in sorted(by_kind.items()):
         envs = sorted({r["env_id"] for r in rows})
         title = f"{kind.capitalize()} environments"
@@ -1248,7 +962,41 @@ def generate(args: Args) -> list[Path]:
         comparison = compare_with_paper(summary)
         write_csv(output / "compare_paper.csv", comparison, written)
         write(output / "compare_paper.md", comparison_markdown(comparison, summary), written)
-    return written
+
+
+# --- the manifest of outputs ----------------------------------------------------------------------
+
+
+def manifest_names(output: Path, paths) -> set[str]:
+    return {str(Path(path).relative_to(output)) for path in paths}
+
+
+def read_manifest(output: Path) -> set[str]:
+    """The outputs the previous run into `output` listed (paths relative to it); none without a manifest."""
+    path = output / MANIFEST
+    if not path.is_file():
+        return set()
+    return {line for line in path.read_text().splitlines() if line and not line.startswith("#")}
+
+
+def write_manifest(output: Path, names: set[str]) -> None:
+    header = "# the files plot_results.py wrote into this folder; a rerun removes those it does not write again\n"
+    write_atomic(output / MANIFEST, header + "".join(f"{name}\n" for name in sorted(names)))
+
+
+def remove_stale(output: Path, names: set[str]) -> list[Path]:
+    """Removes the listed files, and only files inside `output` (never the manifest itself, a folder or
+    a link's target, never a path that leaves `output`); returns those removed."""
+    removed = []
+    for name in sorted(names):
+        relative_path = Path(name)
+        path = output / relative_path
+        if relative_path.is_absolute() or ".." in relative_path.parts or name == MANIFEST:
+            continue
+        if path.is_file() and not path.is_symlink():
+            path.unlink()
+            removed.append(path)
+    return removed
 
 
 def main() -> None:
@@ -1258,8 +1006,9 @@ def main() -> None:
     except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    except OSError as e:
-        print(f"error: cannot write {e.filename or args.output}: {e.strerror or e}", file=sys.stderr)
+    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
+        message = f"cannot write {e.filename}: {e.strerror}" if e.filename else e.strerror or str(e)
+        print(f"error: {message}", file=sys.stderr)
         sys.exit(2)
     except KeyboardInterrupt:
         print("interrupted; the outputs written so far are complete files", file=sys.stderr)

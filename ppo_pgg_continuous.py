@@ -376,7 +376,7 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
-def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):
+def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. Returns (loss, stats); the stats are detached tensors, not floats, so that the
     compiled version (--compile) runs without a break back to Python."""

@@ -185,6 +185,7 @@ class RolloutPolicy:
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_layers(agent.actor), numpy_layers(agent.critic)
+        self.n_actions = agent.actor[-1].out_features
         self.guidance = guidance  # PGG
         with torch.no_grad():  # PGG
             self.logits_null = agent.unconditional_logits().numpy()  # PGG
@@ -237,7 +238,7 @@ def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollo
     obs_buf, dones_buf, actions_buf, logprobs_buf, values_buf, rewards_buf = (
         t.numpy() for t in (buf.obs, buf.dones, buf.actions, buf.logprobs, buf.values, buf.rewards)
     )
-    gumbel = gumbel_noise(*buf.obs.shape[:2], len(policy.logits_null))  # the whole rollout's, in one draw
+    gumbel = gumbel_noise(*buf.obs.shape[:2], policy.n_actions)  # the whole rollout's, in one draw
     for step in range(buf.obs.shape[0]):
         obs_buf[step] = next_obs
         dones_buf[step] = next_done
@@ -274,7 +275,7 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
-def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):
+def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. Returns (loss, stats); the stats are detached tensors, not floats, so that the
     compiled version (--compile) runs without a break back to Python."""

@@ -19,13 +19,12 @@ ending in its last tenth; Welch's t-test compares each across seeds. It writes <
 (learning curves, mean and 95% CI over seeds) and <output>/<env_id>_summary.md.
 """
 
-import ctypes
+import functools
 import hashlib
 import json
 import os
 import platform
 import shutil
-import signal
 import subprocess
 import sys
 import tempfile
@@ -49,9 +48,13 @@ from scipy import stats  # noqa: E402
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+from pgg_utils.files import write_atomic
+from pgg_utils.processes import die_with_parent
+from pgg_utils.stats import ALPHA, welch
+
 IMPLS = ("ours", "cleanrl")
 BINS = 50  # learning-curve bins over the common step range
-ALPHA = 0.05
 SCORES = ("mean return over the common range", "mean return over its last tenth")
 # CleanRL's published end-of-training returns (docs.cleanrl.dev, ppo.py and ppo_continuous_action.py):
 # context for the summary, from other machines, seeds and library versions.
@@ -79,8 +82,6 @@ print(json.dumps({"python": platform.python_version(), "torch": torch.__version_
 """
 # One thread per run, as in the README's measurements; unbuffered, so that a failed run's log is complete.
 CHILD_ENV = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONUNBUFFERED="1")
-LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform.startswith("linux") else None
-PR_SET_PDEATHSIG = 1
 # The children in flight, and the flag that stops new ones once the comparison is interrupted.
 RUNNING: set[subprocess.Popen] = set()
 STOPPING = threading.Event()
@@ -212,20 +213,13 @@ def make_plan(args: Args, folder: Path, total_saved: int | None) -> Plan:
     return Plan(args.env_id, total, folder, scripts, stacks)
 
 
-def in_child() -> None:
+def in_child(parent_pid: int) -> None:
     """Runs in each child between fork and exec. The lowest priority keeps the comparison from slowing
     other work on the machine (it slows both implementations alike), and the parent-death signal kills
     the child if the harness dies, so that no orphan trains on. It fires when the thread that started
     the child ends, which is why a run is started and waited for in the same thread."""
     os.nice(19)
-    if LIBC is not None:
-        LIBC.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL))
-
-
-def write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    die_with_parent(parent_pid)
 
 
 def read_events(run_dir: Path) -> tuple[np.ndarray, int, float] | None:
@@ -264,7 +258,7 @@ def train_one(plan: Plan, run: Run, scratch: Path) -> str | None:
             if STOPPING.is_set():
                 return None
             child = subprocess.Popen(command, cwd=workdir, stdout=out, stderr=subprocess.STDOUT, env=CHILD_ENV,
-                                     preexec_fn=in_child, start_new_session=True)  # fmt: skip
+                                     preexec_fn=functools.partial(in_child, os.getpid()), start_new_session=True)  # fmt: skip
             RUNNING.add(child)
         code = child.wait()
         RUNNING.discard(child)
@@ -381,13 +375,12 @@ def mean_ci(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, half
 
 
-def welch(ours: np.ndarray, cleanrl: np.ndarray) -> float:
-    """Welch's t-test p-value; NaN with fewer than two seeds on a side."""
+def welch_p(ours: np.ndarray, cleanrl: np.ndarray) -> float:
+    """Welch's t-test p-value over seeds (pgg_utils.stats.welch: 1 or 0 where neither side varies, e.g.
+    every CartPole seed at 500 at the end); NaN with fewer than two seeds on a side."""
     if min(len(ours), len(cleanrl)) < 2:
         return np.nan
-    if ours.std() == cleanrl.std() == 0:  # e.g. every CartPole seed at 500 at the end; t is undefined
-        return 1.0 if ours[0] == cleanrl[0] else 0.0
-    return stats.ttest_ind(ours, cleanrl, equal_var=False).pvalue
+    return welch(ours.mean(), ours.std(ddof=1), len(ours), cleanrl.mean(), cleanrl.std(ddof=1), len(cleanrl))[2]
 
 
 def verdict(scores: dict[str, np.ndarray], p_values: list[float]) -> str:
@@ -441,7 +434,7 @@ def compute(env_id: str, folder: Path) -> Analysis:
     trained = {impl: min(run.meta["steps_trained"] for run in runs) for impl, runs in saved.items()}
     end = min(trained.values())
     scores = {impl: np.array([run_scores(run.episodes, end) for run in runs]) for impl, runs in saved.items()}
-    p_values = [welch(scores["ours"][:, i], scores["cleanrl"][:, i]) for i in range(len(SCORES))]
+    p_values = [welch_p(scores["ours"][:, i], scores["cleanrl"][:, i]) for i in range(len(SCORES))]
     labels = {"ours": "ours (--guidance 1)", "cleanrl": f"CleanRL {saved['cleanrl'][0].meta['script']}"}
     return Analysis(env_id, saved_total(folder), trained, end, saved, scores, p_values, labels)
 

@@ -15,6 +15,11 @@ Checkpoints are compared field by field (tensors with torch.equal, dtypes and sh
 row by row on the columns both have, tables and reports byte for byte. A field or column that only
 the newer revision has (new metadata) is listed, not counted as a difference; a value that differs is.
 Exit status 0 when everything both revisions have is identical, 1 otherwise.
+
+With `--speed-pairs N` it then times training instead: CartPole-v1 and Hopper-v4 at γ_train 1.1, each
+revision's script as a whole process, in turns (base, head, head, base, ...) N times, and prints the
+median and range of the head/base wall-time ratio pair by pair (these machines drift; a ratio of two
+runs made seconds apart is what holds).
 """
 
 import csv
@@ -22,7 +27,9 @@ import os
 import shutil
 import subprocess
 import sys
+from statistics import median
 import tempfile
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
@@ -50,6 +57,12 @@ SWEEPS = {
 QUICK = ["reproduce.py", "--preset", "quick", "--total-timesteps", "8192", "--checkpoint-interval", "4096",
          "--episodes", "4", "--workers", "1"]  # fmt: skip
 TEXT_OUTPUTS = (".md", ".tex", ".csv")
+SPEED = {
+    "CartPole-v1 γ_train 1.1, 40,960 steps": ["ppo_pgg_discrete.py", "--env-id", "CartPole-v1", "--guidance", "1.1",
+                                               "--total-timesteps", "40960", "--checkpoint-interval", "40960"],
+    "Hopper-v4 γ_train 1.1, 16,384 steps": ["ppo_pgg_continuous.py", "--env-id", "Hopper-v4", "--guidance", "1.1",
+                                             "--total-timesteps", "16384", "--checkpoint-interval", "16384"],
+}  # fmt: skip
 # mjData arrays MuJoCo fills only on demand: between two runs of one revision they hold whatever the
 # arena held (`compare_revisions.py HEAD HEAD` differs there and nowhere else), so only their shapes count.
 MUJOCO_SCRATCH = (".mujoco.efc_AR", ".mujoco.efc_JT")
@@ -65,6 +78,8 @@ class Args:
     """keep both revisions' outputs in this folder (default: a temporary one, removed)"""
     skip_quick: bool = False
     """leave out the quick preset (the slowest part, about a minute a revision)"""
+    speed_pairs: int = 0
+    """time training instead of comparing outputs: this many (base, head) pairs per configuration"""
 
 
 def export(revision: str, destination: Path) -> None:
@@ -106,6 +121,27 @@ def run_all(tree: Path, skip_quick: bool) -> None:
             run(tree, ["eval_gamma_sweep.py", str(checkpoint.relative_to(tree)), *options, "--output", f"out/{name}"], log)
         if not skip_quick:
             run(tree, [*QUICK, "--root", "out/quick_runs", "--results", "out/quick_results"], log)
+
+
+def timed_run(tree: Path, command: list[str]) -> float:
+    """Wall seconds of one training run of `tree`, as a command, one thread."""
+    with tempfile.TemporaryDirectory() as out:
+        start = time.perf_counter()
+        run(tree, [*command, "--output-dir", out, "--run-name", "timed"], open(os.devnull, "w"))
+        return time.perf_counter() - start
+
+
+def compare_speed(trees: dict[str, Path], pairs: int) -> None:
+    for name, command in SPEED.items():
+        ratios, seconds = [], {"base": [], "head": []}
+        for i in range(pairs):
+            order = ("base", "head") if i % 2 == 0 else ("head", "base")
+            times = {label: timed_run(trees[label], command) for label in order}
+            for label in times:
+                seconds[label].append(times[label])
+            ratios.append(times["head"] / times["base"])
+        print(f"{name}: base {median(seconds['base']):.1f} s, head {median(seconds['head']):.1f} s (medians); "
+              f"head/base {median(ratios):.3f} (range {min(ratios):.3f} to {max(ratios):.3f}, {pairs} pairs)", flush=True)  # fmt: skip
 
 
 def compare_values(a, b, where: str, differences: list[str], added: list[str]) -> None:
@@ -178,6 +214,9 @@ def main() -> None:
             if trees[label].exists():
                 shutil.rmtree(trees[label])
             export(revision, trees[label])
+        if args.speed_pairs:
+            compare_speed(trees, args.speed_pairs)
+            return
         with ThreadPoolExecutor(2) as pool:  # one process per revision at a time, one thread each
             for future in [pool.submit(run_all, tree, args.skip_quick) for tree in trees.values()]:
                 future.result()

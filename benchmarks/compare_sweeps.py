@@ -23,6 +23,10 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
+from pgg_utils.agreement import compare_row, fmt, fmt_p, p_is, step_label
+from pgg_utils.files import InputError, write_atomic
+from pgg_utils.paper import paper_name
+from pgg_utils.stats import ALPHA, correct_family, sign_test
 
 
 @dataclass
@@ -38,14 +42,15 @@ class Args:
 
 
 def cells(path: str) -> dict:
-    """{(env, variant, step, eval γ): summary row} of one sweep; one configuration per env and variant."""
+    """{(env, variant, step, eval γ): summary row} of one sweep; one configuration per env and variant
+    (its config label and its exact training guidance and dropout)."""
     rows = plots.summarise(plots.select_mode(plots.read_episodes([path]), "sample", "learned"))
     configs = defaultdict(set)
     for r in rows:
-        configs[(r["env_id"], r["variant"])].add(r["config"])
+        configs[(r["env_id"], r["variant"])].add((r["config"], r["train_guidance"], r["cond_dropout"]))
     for (env, variant), found in configs.items():
         if len(found) > 1:
-            raise plots.InputError(
+            raise InputError(
                 f"{path} has {len(found)} configurations of {variant} on {env}; compare one at a time"
             )
     return {(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])): r for r in rows}
@@ -59,22 +64,26 @@ def check_same_config(first: dict, second: dict) -> None:
         for t in tokens:
             t.pop("mujoco", None)
         if tokens[0] != tokens[1]:
-            raise plots.InputError(f"{key[1]} on {key[0]} is '{first[key]['config']}' in one sweep and "
-                                   f"'{second[key]['config']}' in the other; compare one configuration")  # fmt: skip
+            raise InputError(f"{key[1]} on {key[0]} is '{first[key]['config']}' in one sweep and "
+                             f"'{second[key]['config']}' in the other; compare one configuration")  # fmt: skip
+        exact = [(side[key]["train_guidance"], side[key]["cond_dropout"]) for side in (first, second)]
+        if exact[0] != exact[1]:  # the labels round both to 6 digits
+            raise InputError(f"{key[1]} on {key[0]} trains with guidance, dropout {exact[0]} in one sweep and "
+                             f"{exact[1]} in the other; compare one configuration")  # fmt: skip
 
 
 def compare(first: dict, second: dict, second_label: str) -> list[dict]:
     """One row per cell of both sweeps, first against second (Welch), Holm over all of them."""
     shared = sorted(first.keys() & second.keys(), key=lambda k: (k[0], plots.variant_rank(k[1]), k[1], k[2], k[3]))
     if not shared:
-        raise plots.InputError("the two sweeps have no cell (env, variant, step, eval γ) in common")
+        raise InputError("the two sweeps have no cell (env, variant, step, eval γ) in common")
     check_same_config(first, second)
     out = []
     for key in shared:
         other = second[key]
-        out.append(plots.compare_row(first[key], second_label, float(other["mean"]), float(other["ci95"]),
-                                     float(other["sd"]), int(other["n_seeds"])))  # fmt: skip
-    plots.correct_family(out)
+        out.append(compare_row(first[key], second_label, float(other["mean"]), float(other["ci95"]),
+                               float(other["sd"]), int(other["n_seeds"])))  # fmt: skip
+    correct_family(out)
     return out
 
 
@@ -86,7 +95,7 @@ def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str], 
              f"- {first}: `{sources[0]}` ({unmatched[0]} of its cells not in the other, left out)",
              f"- {second}: `{sources[1]}` ({unmatched[1]} of its cells not in the other, left out)", "",
              (f"{len(rows)} cells in both; **{n_sig} differ significantly** (Welch's t on the per-seed means, "
-             f"Holm-corrected over the {len(rows)} cells, family-wise α = {plots.ALPHA}). Sign test: {first} above "
+             f"Holm-corrected over the {len(rows)} cells, family-wise α = {ALPHA}). Sign test: {first} above "
              f"vs below {second} over a group's cells, ties left out; the cells of a group share their runs, so "
              "read its p-value as a description. diff = first − second."), "",
              (f"| env | variant | cells | differ after Holm | p < 0.05 uncorrected | {first} above / below (sign test) "
@@ -96,32 +105,32 @@ def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str], 
     for r in rows:
         groups[(r["env_id"], r["variant"])].append(r)
     for (env, variant), group in groups.items():
-        above, below, ties, p_sign = plots.sign_test([r["diff"] for r in group])
+        above, below, ties, p_sign = sign_test([r["diff"] for r in group])
         pct = [r["diff_pct"] for r in group if not math.isnan(r["diff_pct"])]
-        raw = sum(1 for r in group if not math.isnan(r["p"]) and r["p"] < plots.ALPHA)
+        raw = sum(1 for r in group if not math.isnan(r["p"]) and r["p"] < ALPHA)
         last_step = max(r["step"] for r in group)
         final = [r for r in group if r["step"] == last_step and r["eval_guidance"] == 1.0]
         final_text = "–"
         if final:
             f = final[0]
-            final_text = (f"{plots.step_label(f['step'])}: {plots.fmt(f['our_mean'])} ± {plots.fmt(f['our_ci95'])} vs "
-                          f"{plots.fmt(f['ref_mean'])} ± {plots.fmt(f['ref_ci95'])} ({plots.p_is(f['p'])})")  # fmt: skip
+            final_text = (f"{step_label(f['step'])}: {fmt(f['our_mean'])} ± {fmt(f['our_ci95'])} vs "
+                          f"{fmt(f['ref_mean'])} ± {fmt(f['ref_ci95'])} ({p_is(f['p'])})")  # fmt: skip
         spread = f"{np.mean(pct):+.1f}% ({min(pct):+.0f} to {max(pct):+.0f})" if pct else "–"
-        lines.append(f"| {env} | {plots.paper_name(variant)} | {len(group)} | "
+        lines.append(f"| {env} | {paper_name(variant)} | {len(group)} | "
                      f"{sum(r['significant'] == 'True' for r in group)} | {raw} | "
                      f"{above} / {below}{f', {ties} tied' if ties else ''}"
-                     f"{f' ({plots.p_is(p_sign)})' if above + below else ''} | {spread} | "
+                     f"{f' ({p_is(p_sign)})' if above + below else ''} | {spread} | "
                      f"{final_text} |")  # fmt: skip
     lines += ["", "## Cells", "",
               f"| env | variant | step | eval γ | {first} | {second} | diff | diff % | Welch p | Holm p | g |",
               "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in rows:
         mark = " ✗" if r["significant"] == "True" else ""
-        lines.append(f"| {r['env_id']} | {plots.paper_name(r['variant'])} | {plots.step_label(r['step'])} | {r['eval_guidance']:g} | "
-                     f"{plots.fmt(r['our_mean'])} ± {plots.fmt(r['our_ci95'])} | "
-                     f"{plots.fmt(r['ref_mean'])} ± {plots.fmt(r['ref_ci95'])} | {r['diff']:+.1f} | "
-                     f"{plots.fmt(r['diff_pct'])} | {plots.fmt_p(r['p'])} | {plots.fmt_p(r['p_holm'])}{mark} | "
-                     f"{plots.fmt(r['hedges_g'], 2)} |")  # fmt: skip
+        lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {step_label(r['step'])} | {r['eval_guidance']:g} | "
+                     f"{fmt(r['our_mean'])} ± {fmt(r['our_ci95'])} | "
+                     f"{fmt(r['ref_mean'])} ± {fmt(r['ref_ci95'])} | {r['diff']:+.1f} | "
+                     f"{fmt(r['diff_pct'])} | {fmt_p(r['p'])} | {fmt_p(r['p_holm'])}{mark} | "
+                     f"{fmt(r['hedges_g'], 2)} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
@@ -133,14 +142,15 @@ def main() -> None:
         unmatched = (len(first.keys() - second.keys()), len(second.keys() - first.keys()))
         text = report(rows, args.labels, (args.first, args.second), unmatched)
         if args.output:
-            plots.write(Path(args.output), text, [])
+            write_atomic(Path(args.output), text)
         else:
             print(text, end="")
-    except plots.InputError as e:
+    except InputError as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
-    except OSError as e:
-        print(f"error: cannot write {e.filename or args.output}: {e.strerror or e}", file=sys.stderr)
+    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
+        message = f"cannot write {e.filename}: {e.strerror}" if e.filename else e.strerror or str(e)
+        print(f"error: {message}", file=sys.stderr)
         sys.exit(2)
 
 

@@ -19,8 +19,8 @@ the paper gives no numbers for them.
 """
 
 import csv
+import io
 import math
-import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +32,9 @@ from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results  # from the repository root, added to the path above
+from pgg_utils.agreement import step_label
+from pgg_utils.files import InputError, write_atomic
+from pgg_utils.stats import holm
 
 FIGURE_SIZE = (2586, 1319)  # the calibration below holds for this rendering of the figure only
 # (line, eval γ) -> marker colour: the dropout model's lines in the legend's viridis, and the paper's PPO
@@ -103,7 +106,7 @@ def our_summary(episodes: tuple[Path, ...], provenance: Path | None) -> list[dic
     try:
         rows = plot_results.select_mode(plot_results.read_episodes([str(p) for p in episodes]), "sample", "learned")
         return plot_results.summarise(rows, plot_results.read_provenance(str(provenance) if provenance else None))
-    except plot_results.InputError as e:
+    except InputError as e:
         sys.exit(f"error: {e}")
 
 
@@ -133,7 +136,7 @@ def comparison_table(readings: list[dict], summary: list[dict]) -> str:
         paper_text = "hidden under another marker" if paper is None else f"{paper:.1f}"
         ours_text = "not run" if ours is None else f"{ours['mean']:.1f} ± {ours['ci95']:.1f}"
         inside = "" if paper is None or ours is None else ("yes" if abs(paper - ours["mean"]) <= ours["ci95"] else "**no**")
-        lines.append(f"| {r['env_id']} | {plot_results.step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
+        lines.append(f"| {r['env_id']} | {step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
     return "\n".join(lines) + "\n"
 
 
@@ -165,9 +168,9 @@ def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, st
             half = stats.t.ppf(0.975, len(diffs) - 1) * diffs.std(ddof=1) / np.sqrt(len(diffs))
             row["paired"] = (diffs.mean(), half, stats.ttest_1samp(diffs, 0.0).pvalue)
         rows.append(row)
-    welch_holm = iter(plot_results.holm([p for row in rows for _, p in row["welch"]]))
-    paired_holm = iter(plot_results.holm([row["paired"][2] for row in rows if row["paired"]]))
-    lines = [(f"At {plot_results.step_label(step)} steps; ours: mean ± 95% CI over seeds; p two-sided, Holm-corrected "
+    welch_holm = iter(holm([p for row in rows for _, p in row["welch"]]))
+    paired_holm = iter(holm([row["paired"][2] for row in rows if row["paired"]]))
+    lines = [(f"At {step_label(step)} steps; ours: mean ± 95% CI over seeds; p two-sided, Holm-corrected "
               "over the tasks of a column in brackets. The paper's PPO is its table's; its dropout values are read off "
               "its figure (– where a marker is hidden)."), "",
              ("| task | PPO, ours (γ = 1) | dropout, ours (γ = 1) | Welch p (Holm) | paper: PPO / dropout (γ = 1) "
@@ -210,9 +213,9 @@ def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
         draw.text((20, y + 15), caption, fill="black", font=font)
         canvas.paste(im.convert("RGB"), (0, y + strip))
         y += im.height + strip
-    tmp = path.with_name(path.name + ".tmp.png")
-    canvas.save(tmp)
-    os.replace(tmp, path)
+    image = io.BytesIO()
+    canvas.save(image, format="PNG")
+    write_atomic(path, image.getvalue())
 
 
 def open_image(path: Path) -> Image.Image:
@@ -252,7 +255,7 @@ def main(args: Args) -> None:
         text = ("# The dropout ablation against the paper's figure\n\n## Does dropout, or guidance on top of it, cost return?\n\n"
                 + effects_table(rows, summary, paper_ppo) + "\n## Every read marker beside our cell\n\n"
                 + comparison_table(rows, summary))  # fmt: skip
-        plot_results.write(args.table, text, [])
+        write_atomic(args.table, text)
         print(f"wrote {args.table}")
 
 

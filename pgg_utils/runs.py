@@ -14,6 +14,8 @@ import random
 import shutil
 import subprocess
 import sys
+import tempfile
+import threading
 import warnings
 from collections import deque
 from dataclasses import asdict
@@ -85,6 +87,8 @@ def env_error(env_id: str, kind: str, capture_video: bool = False) -> str | None
 
 def video_error(env: gym.Env) -> str | None:
     """Why this env cannot be recorded here (a missing package or rendering backend), or None."""
+    if not os.environ.get("XDG_RUNTIME_DIR"):  # SDL (pygame's renderer) complains of it at every init
+        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="xdg_runtime_")
     try:
         import moviepy  # noqa: F401  (gymnasium's RecordVideo writes with it)
 
@@ -413,7 +417,10 @@ class Run:
         if self.progress is not None:
             self.progress.close()
         if self.writer is not None:
-            self.writer.close()
+            try:
+                self.writer.close()
+            except OSError:  # a full disk, already reported by the write that met it
+                pass
             if self.args.track:
                 import wandb
 
@@ -443,6 +450,7 @@ class Run:
 
             wandb.init(project=args.wandb_project_name, entity=args.wandb_entity, sync_tensorboard=True,
                        config=asdict(args), name=self.dir.name, save_code=True)  # fmt: skip
+        threading.excepthook = quiet_event_writer_thread
         self.writer = SummaryWriter(str(self.dir), purge_step=resumed["global_step"] + 1 if resumed else None)
         self.writer.add_text(
             "hyperparameters",
@@ -523,6 +531,15 @@ class Run:
         print(f"global_step={global_step} mark={mark} mean_return(last 20)={mean:.1f}", flush=True)
 
 
+def quiet_event_writer_thread(hook_args) -> None:
+    """threading.excepthook: TensorBoard's writer thread re-raises its error (a full disk) in the
+    training thread at the next write, which reports it in one line; its own traceback would be a
+    second report, interleaved with the first."""
+    if type(hook_args.thread).__name__ == "_AsyncWriterThread" and issubclass(hook_args.exc_type, OSError):
+        return
+    threading.__excepthook__(hook_args)
+
+
 def resume_state(iteration: int, optimizer, envs, next_obs: np.ndarray, next_done: np.ndarray) -> dict:
     """What continuing a run needs besides the model: the optimizer, the sub-envs mid-episode, the
     next observation and every RNG state."""
@@ -580,8 +597,12 @@ def launch(args, kind: str, script: str, train) -> None:
             kept = f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
             print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
             sys.exit(130)
-        kept = f"; checkpoints up to {latest.name} are kept" if latest and isinstance(e, OSError) else ""
-        print(f"error: {e.strerror or e if isinstance(e, OSError) else e}{kept}", file=sys.stderr)
+        message = str(e)
+        if isinstance(e, OSError):  # write_atomic's name the file; TensorBoard's name nothing
+            written = e.strerror and e.strerror.startswith("cannot write")
+            message = e.strerror if written else f"cannot write in {run.dir}: {e.strerror or e}"
+            message += f"; checkpoints up to {latest.name} are kept" if latest else ""
+        print(f"error: {message}", file=sys.stderr)
         sys.exit(1)
     finally:
         run.close()

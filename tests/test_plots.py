@@ -7,10 +7,12 @@ import sys
 import matplotlib
 import numpy as np
 import pytest
+from conftest import ROOT
 from scipy import stats
 
 import plot_results as plots
-from conftest import ROOT
+from pgg_utils.files import read_csv
+from pgg_utils.stats import hedges_g, holm, null_rates, sd_from_ci, sign_test, welch
 
 # Per-seed mean returns of the synthetic sweep: (env, variant, step, eval γ) -> three seed means.
 # Two episodes per seed, at mean ± 1. With means m, m+1, m+2 the summary is (m+1) ± t(.975,2)·1/√3 = ± 2.5.
@@ -35,7 +37,8 @@ COLUMNS = ["env_id", "variant", "run", "seed", "train_guidance", "cond_dropout",
            "policy", "null_branch", "episode", "episode_seed", "return", "length"]  # fmt: skip
 
 
-def episode_rows(seed_means: dict, config: str | None = None, run_suffix: str = "", policy="sample") -> list[dict]:
+def episode_rows(seed_means: dict, config: str | None = None, run_suffix: str = "", policy="sample",
+                 action_space: str | None = None) -> list[dict]:
     rows = []
     for (env, variant, step, gamma), means in seed_means.items():
         for seed, mean in enumerate(means, start=1):
@@ -46,13 +49,15 @@ def episode_rows(seed_means: dict, config: str | None = None, run_suffix: str = 
                        "episode": episode, "episode_seed": 10_000 + episode, "return": ret, "length": 1}  # fmt: skip
                 if config is not None:
                     row["config"] = config if " " in config else f"{variant} {config}".strip()
+                if action_space is not None:
+                    row["action_space"] = action_space
                 rows.append(row)
     return rows
 
 
 def write_episodes(path, rows) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    columns = COLUMNS + (["config"] if any("config" in r for r in rows) else [])
+    columns = COLUMNS + [c for c in ("config", "action_space") if any(c in r for r in rows)]
     with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, columns)
         writer.writeheader()
@@ -76,7 +81,7 @@ def summary_of(*paths, provenance=None):
 
 def run_cli(*args, cwd=None):
     return subprocess.run([sys.executable, str(ROOT / "plot_results.py"), *map(str, args)], capture_output=True, text=True,
-                          timeout=120, cwd=cwd)  # fmt: skip
+                          timeout=120, cwd=cwd, check=False)  # fmt: skip
 
 
 def one_error_line(proc, message: str) -> None:
@@ -119,33 +124,33 @@ def test_latex_is_well_formed(sweep_dir, tmp_path):
 
 def test_welch_and_effect_size_match_hand_computed_values():
     # ours 10 (sd 1, n 5) vs 12 (sd 2, n 5): t = -2 / sqrt(1/5 + 4/5) = -2; df = 1 / (0.2²/4 + 0.8²/4) = 5.882
-    t_value, df, p = plots.welch(10, 1, 5, 12, 2, 5)
+    t_value, df, p = welch(10, 1, 5, 12, 2, 5)
     assert t_value == pytest.approx(-2.0) and df == pytest.approx(1 / 0.17)
     assert p == pytest.approx(stats.ttest_ind_from_stats(10, 1, 5, 12, 2, 5, equal_var=False).pvalue, rel=1e-12)
     assert p == pytest.approx(0.0933789, abs=1e-6)
     # Hedges' g: pooled sd 2, d = 1, J = 1 - 3 / (4·10 - 9) = 28/31
-    assert plots.hedges_g(12, 2, 5, 10, 2, 5) == pytest.approx(28 / 31)
+    assert hedges_g(12, 2, 5, 10, 2, 5) == pytest.approx(28 / 31)
     # the paper's 270.6 ± 81.3 over 5 seeds: sd = 81.3 · √5 / t_{0.975,4}
-    assert plots.sd_from_ci(81.3, 5) == pytest.approx(65.47665, abs=1e-4)
-    assert plots.welch(500, 0, 5, 500, 0, 5)[2] == 1.0 and plots.welch(500, 0, 5, 499, 0, 5)[2] == 0.0
+    assert sd_from_ci(81.3, 5) == pytest.approx(65.47665, abs=1e-4)
+    assert welch(500, 0, 5, 500, 0, 5)[2] == 1.0 and welch(500, 0, 5, 499, 0, 5)[2] == 0.0
 
 
 def test_holm_adjusts_in_step_down_order_and_keeps_nans():
     # sorted 0.005·4 = 0.02, 0.01·3 = 0.03, 0.03·2 = 0.06, max(0.04·1, 0.06) = 0.06
-    adjusted = plots.holm([0.01, 0.04, math.nan, 0.03, 0.005])
+    adjusted = holm([0.01, 0.04, math.nan, 0.03, 0.005])
     assert adjusted[:2] == pytest.approx([0.03, 0.06]) and math.isnan(adjusted[2])
     assert adjusted[3:] == pytest.approx([0.06, 0.02])
-    assert plots.holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
+    assert holm([0.5, 0.9]) == pytest.approx([1.0, 1.0])
 
 
 def test_sign_test_counts_above_below_and_ties():
-    above, below, ties, p = plots.sign_test([1.0, 2.0, 3.0, -1.0, 0.0])
+    above, below, ties, p = sign_test([1.0, 2.0, 3.0, -1.0, 0.0])
     assert (above, below, ties) == (3, 1, 1) and p == pytest.approx(0.625)
-    assert plots.sign_test([-1.0] * 10)[3] == pytest.approx(2 * 0.5**10)
+    assert sign_test([-1.0] * 10)[3] == pytest.approx(2 * 0.5**10)
 
 
 def test_simulated_null_overlap_rate_is_near_certain():
-    rates = plots.null_rates(draws=20_000, shifts=(0.0, 2.0))
+    rates = null_rates(5, draws=20_000, shifts=(0.0, 2.0))
     assert 0.99 < rates[0]["overlap"] < 0.998  # 99.4% for two 5-seed samples of one distribution
     assert rates[0]["welch_reject"] < 0.06 < rates[1]["welch_reject"]
 
@@ -154,10 +159,10 @@ def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_p
     generate(sweep_dir, tmp_path, compare_paper=True)
     with open(tmp_path / "out" / "compare_paper.csv") as f:
         rows = [r for r in csv.DictReader(f) if r["reference"] == "paper"]
-    key = lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))  # noqa: E731
+    key = lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))
     assert {key(r) for r in rows} == set(SEED_MEANS)
     paper = {(p["env_id"], p["method"], int(p["step"]), float(p["eval_guidance"])): p
-             for p in csv.DictReader(open(ROOT / "data" / "paper_results.csv"))}  # fmt: skip
+             for p in read_csv(ROOT / "data" / "paper_results.csv")}  # fmt: skip
     expected_p = []
     for r in rows:
         p = paper[(r["env_id"], "ppo" if r["variant"] == "ppo" else "pgg", int(r["step"]), float(r["eval_guidance"]))]
@@ -185,7 +190,7 @@ def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
     means = {("CartPole-v1", "ppo", 500000, 1.0): [489.0, 490.0, 491.0], ("CartPole-v1", "ppo", 400000, 1.0): [480.0, 481.0, 482.0]}
     write_episodes(tmp_path / "episodes.csv", episode_rows(means))
     plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"), compare_paper=True))
-    rows = list(csv.DictReader(open(tmp_path / "out" / "compare_paper.csv")))
+    rows = read_csv(tmp_path / "out" / "compare_paper.csv")
     cleanrl = [r for r in rows if r["reference"] == "cleanrl"]
     assert len(cleanrl) == 1 and cleanrl[0]["step"] == "500000"
     assert float(cleanrl[0]["ref_mean"]) == 490.04
@@ -235,6 +240,20 @@ def test_same_config_and_seed_from_two_runs_is_an_error_naming_both(tmp_path):
         plots.read_episodes([tmp_path / "a.csv", tmp_path / "copy.csv"])
 
 
+def test_configurations_are_grouped_on_their_exact_guidance(tmp_path):
+    """γ_train 1.1 and 1.1000000001 share a variant and config label (both print as `pgg_g1.1`) and, with
+    default run names, a run name per seed: still two configurations, neither pooled nor refused."""
+    cell = {("CartPole-v1", "pgg_g1.1", 100000, 1.0): [300.0, 301.0, 302.0]}
+    nearby = [r | {"train_guidance": 1.1000000001, "return": r["return"] + 100} for r in episode_rows(cell)]
+    write_episodes(tmp_path / "episodes.csv", episode_rows(cell) + nearby)
+    summary = summary_of(tmp_path / "episodes.csv")
+    assert sorted((r["series"], r["train_guidance"], r["n_seeds"], r["mean"]) for r in summary) == [
+        ("guidance=1.1", 1.1, 3, 301.0), ("guidance=1.1000000001", 1.1000000001, 3, 401.0)]  # fmt: skip
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
+    table = (tmp_path / "out" / "table_discrete.md").read_text()
+    assert "| pgg_g1.1 [guidance=1.1] |" in table and "| pgg_g1.1 [guidance=1.1000000001] |" in table
+
+
 def test_cells_from_another_mujoco_are_marked(tmp_path):
     hopper = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0], ("Walker2d-v4", "ppo", 200000, 1.0): [800.0, 810.0, 820.0]}
     rows = episode_rows(hopper)
@@ -261,6 +280,71 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
     assert plots.panel_title("Walker2d-v4", mixed) == "Walker2d-v4 (3 seeds, PPO on MuJoCo 3.1.6)"
 
 
+# --- what plot_results needs, where an env belongs, what a rerun leaves ----------------------------
+
+
+def test_plot_results_imports_neither_torch_nor_the_training_scripts():
+    """Tables from committed CSVs, and a usage error, need no torch (seconds to import) and no training code."""
+    code = ("import plot_results, sys; assert 'torch' not in sys.modules; "
+            "assert not {'eval_gamma_sweep', 'ppo_pgg_discrete', 'ppo_pgg_continuous'} & set(sys.modules)")  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
+                          check=False)
+    assert proc.returncode == 0, proc.stderr
+
+
+@pytest.mark.parametrize("env,action_space", [("Pendulum-v1", None), ("Pendulum-v1", "continuous"),
+                                              ("LunarLanderContinuous-v3", "continuous")])  # fmt: skip
+def test_an_env_is_tabled_by_its_action_space_not_its_name(tmp_path, env, action_space):
+    """Pendulum-v1 and LunarLanderContinuous-v3 act continuously, whatever their version suffix: by the
+    rows' action_space where the sweep recorded it, else by the task's own action space (here Pendulum's;
+    CartPole's rows leave the column empty)."""
+    rows = episode_rows({(env, "ppo", 100000, 1.0): [-900.0, -800.0, -700.0]}, action_space=action_space)
+    rows += episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272]})
+    write_episodes(tmp_path / "episodes.csv", rows)
+    assert {(r["env_id"], r["kind"]) for r in summary_of(tmp_path / "episodes.csv")} == {
+        (env, "continuous"), ("CartPole-v1", "discrete")}  # fmt: skip
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"),
+                              paper_layout=False))
+    assert (tmp_path / "out" / "table_continuous.md").read_text().splitlines()[2] == f"| Method | {env} |"
+    assert (tmp_path / "out" / "table_discrete.md").read_text().splitlines()[2] == "| Method | CartPole-v1 |"
+
+
+def test_a_rerun_removes_the_outputs_of_the_previous_run_it_does_not_write_again(tmp_path, monkeypatch):
+    both = {("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272], ("Hopper-v4", "ppo", 200000, 1.0): [1000, 1100, 1200]}
+    write_episodes(tmp_path / "both.csv", episode_rows(both))
+    write_episodes(tmp_path / "cartpole.csv", episode_rows({k: v for k, v in both.items() if k[0] == "CartPole-v1"}))
+    out, outside = tmp_path / "out", tmp_path / "outside.md"
+
+    def run(sweep: str) -> list:
+        return plots.generate(plots.Args(sweeps=(str(tmp_path / sweep),), output=str(out)))
+
+    def listed() -> set:
+        return set((out / "outputs.txt").read_text().splitlines()[1:])
+
+    first = run("both.csv")
+    assert out / "outputs.txt" in first and listed() == {p.name for p in first} - {"outputs.txt"}
+    assert (out / "table_continuous.md").exists() and (out / "fig_continuous_ppo.png").exists()
+    (out / "notes.md").write_text("not plot_results'")
+    (out / "learning_curves.png").write_bytes(b"of an earlier run with --runs, before manifests")
+    outside.write_text("outside the folder")
+    (out / "outputs.txt").write_text((out / "outputs.txt").read_text() + "../outside.md\n")
+    second = run("cartpole.csv")
+    assert {p.name for p in out.iterdir()} == {p.name for p in second} | {"notes.md", "learning_curves.png"}
+    assert not (out / "table_continuous.md").exists() and outside.exists()
+    assert listed() == {p.name for p in second} - {"outputs.txt"}
+
+    def interrupted(summary):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(plots, "aggregate_iqm", interrupted)  # after the tables and figures are written
+    with pytest.raises(KeyboardInterrupt):
+        run("both.csv")
+    assert {"table_continuous.md", "aggregate_iqm.md"} <= listed()  # this run's files and the previous run's
+    monkeypatch.undo()
+    third = run("cartpole.csv")
+    assert {p.name for p in out.iterdir()} == {p.name for p in third} | {"notes.md", "learning_curves.png"}
+
+
 # --- figures --------------------------------------------------------------------------------------
 
 
@@ -282,14 +366,14 @@ def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
     assert legend_labels(fig) == ["PPO", "γ = 2", "γ = 1"]  # the paper's order: PPO, then the highest γ first
     assert fig._suptitle.get_text().startswith("PGG, γ_train = 1.1")
     assert "pgg_g1.1" not in fig._suptitle.get_text() and "checkpoints, eval guidance" not in fig._suptitle.get_text()
-    cartpole = [line for line in fig.axes[1].get_lines() if line.get_label() == "γ = 2"][0]
+    cartpole = next(line for line in fig.axes[1].get_lines() if line.get_label() == "γ = 2")
     assert list(cartpole.get_ydata()) == [101.0, 500.0]
     ppo_fig = plots.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "ppo")
     assert ppo_fig._suptitle.get_text().startswith("PPO")
     for path in written:
         if path.suffix in (".png", ".pdf"):
             head = path.read_bytes()[:8]
-            assert head.startswith(b"\x89PNG") or head.startswith(b"%PDF")
+            assert head.startswith((b"\x89PNG", b"%PDF"))
             assert 5_000 < path.stat().st_size < 5_000_000
 
 
@@ -358,7 +442,7 @@ def test_learning_curves_draw_few_points_and_say_so(tmp_path):
     finally:
         plots.save_figure = real_save
     ax = captured["fig"].axes[0]
-    line = [line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)"][0]
+    line = next(line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)")
     assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
     assert any("too few points" in t.get_text() and "only 2 points" in t.get_text() for t in ax.texts)
     assert (tmp_path / "out" / "learning_curves.png").exists()
@@ -369,10 +453,10 @@ def test_learning_curves_draw_few_points_and_say_so(tmp_path):
 
 def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
     generate(sweep_dir, tmp_path)
-    best = list(csv.DictReader(open(tmp_path / "out" / "best_gamma.csv")))
+    best = read_csv(tmp_path / "out" / "best_gamma.csv")
     chosen = {(r["env_id"], r["variant"], r["step"]): float(r["best_eval_guidance"]) for r in best}
     assert chosen[("CartPole-v1", "pgg_g1.1", "100000")] == 1.0 and chosen[("Acrobot-v1", "pgg_g1.1", "100000")] == 2.0
-    aggregate = list(csv.DictReader(open(tmp_path / "out" / "aggregate_iqm.csv")))
+    aggregate = read_csv(tmp_path / "out" / "aggregate_iqm.csv")
     row = next(r for r in aggregate if r["variant"] == "pgg_g1.1" and r["step"] == "200000" and r["eval_guidance"] == "2.0")
     assert float(row["iqm"]) == pytest.approx(1.0, abs=0.02)  # best cell in both envs at 200k
     assert float(row["ci_low"]) <= float(row["iqm"]) <= float(row["ci_high"])
@@ -408,6 +492,8 @@ def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
         ("empty", [], "is empty"),
         ("columns", [], "lacks columns"),
         ("foreign_env", ["--compare-paper"], "none of the swept envs"),
+        ("unknown_env", [], "records no action_space for MyEnv-v0, and cannot make environment 'MyEnv-v0'"),
+        ("two_kinds", [], "CartPole-v1 has discrete actions in"),
     ],
 )
 def test_bad_input_exits_with_one_line(tmp_path, setup, extra, message):
@@ -416,8 +502,13 @@ def test_bad_input_exits_with_one_line(tmp_path, setup, extra, message):
         target.write_text("")
     elif setup == "columns":
         target.write_text("a,b\n1,2\n")
-    elif setup == "foreign_env":
+    elif setup == "foreign_env":  # not in the paper, and not a gymnasium task: its rows say how it acts
+        write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}, action_space="discrete"))
+    elif setup == "unknown_env":
         write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}))
+    elif setup == "two_kinds":
+        cell = {("CartPole-v1", "ppo", 1000, 1.0): [1.0, 2.0]}
+        write_episodes(target, episode_rows(cell) + episode_rows(cell, run_suffix="b", action_space="continuous"))
     one_error_line(run_cli(target, "--output", tmp_path / "o", *extra), message)
 
 
@@ -450,21 +541,22 @@ def test_invalid_choices_are_rejected_up_front(sweep_dir, tmp_path):
 def test_learning_curves_never_count_one_seed_twice(tmp_path):
     """The same run name under two roots (two machines, two MuJoCo versions) is two runs of one
     configuration and seed: an error naming both, not one curve with twice the seeds."""
-    import shutil
+    from torch.utils.tensorboard import SummaryWriter
 
-    import ppo_pgg_discrete
-
-    args = ppo_pgg_discrete.Args(total_timesteps=512, checkpoint_interval=512, output_dir=str(tmp_path / "a"))
-    run_dir = ppo_pgg_discrete.prepare_run_dir(args)
-    ppo_pgg_discrete.train(args, run_dir)
-    shutil.copytree(tmp_path / "a", tmp_path / "b")
+    for root in ("a", "b"):
+        run = tmp_path / root / "CartPole-v1__ppo_pgg__g1__p0__s1"
+        run.mkdir(parents=True)
+        (run / "args.json").write_text('{"env_id": "CartPole-v1", "guidance": 1.0, "cond_dropout": 0.0, "seed": 1}')
+        writer = SummaryWriter(str(run))
+        writer.add_scalar("charts/episodic_return", 20.0, 512)
+        writer.close()
     with pytest.raises(plots.InputError, match="two runs of one configuration and seed 1"):
         plots.learning_curves([str(tmp_path / "a"), str(tmp_path / "b")], tmp_path / "out", [])
 
 
 PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"
 sys.path.insert(0, str(ROOT / "data"))
-import read_dropout_figure as reader  # noqa: E402
+import read_dropout_figure as reader
 
 
 @pytest.mark.skipif(not PAPER_DROPOUT_FIGURE.is_file(), reason="the paper's figures are in ../shared/paper, not in the repository")

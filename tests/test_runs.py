@@ -441,3 +441,21 @@ def test_target_kl_with_every_row_dropped_is_refused(tmp_path):
 
 def test_an_eta_reads_in_minutes_and_seconds():
     assert [progress.format_duration(s) for s in (100, 3599, 3600, 7325)] == ["1m40s", "59m59s", "1h00m", "2h02m"]
+
+
+def test_a_full_disk_under_tensorboard_is_one_line_naming_the_run_directory(tmp_path, monkeypatch, capsys):
+    from tensorboard.summary.writer import record_writer
+
+    real_write, writes = record_writer.RecordWriter.write, []
+
+    def full_after_three(self, data):
+        writes.append(1)
+        if len(writes) > 3:
+            raise OSError(28, "No space left on device")
+        return real_write(self, data)
+
+    monkeypatch.setattr(record_writer.RecordWriter, "write", full_after_three)
+    args = small_args("discrete", tmp_path)
+    code, error = launch(ppo_pgg_discrete, args, capsys)
+    assert code == 1 and len(error) == 1, error
+    assert error[0] == f"error: cannot write in {tmp_path / runs.default_run_name(args)}: No space left on device"
