@@ -9,40 +9,37 @@ The grid is environments × seeds × training variants:
   ppo          PPO, γ_train = 1 (the null embedding gets no gradient: CleanRL's PPO algorithm)
   pgg_g1.1     PGG, γ_train = 1.1, no dropout (the paper's main variant)
   pgg_drop0.1  PGG, γ_train = 1, conditioning dropout 0.1
-Run directories are <root>/<env>__<variant>__s<seed>, logs <root>/logs/<run>.log. Rerunning the same
-command skips every run whose final checkpoint exists, resumes a half-finished run from its last
-checkpoint (bit for bit, see the training scripts' --resume) and skips every finished sweep cell, so
-killing the launcher loses at most the work since each run's last checkpoint: its local training
-children die with it, even when it is SIGKILLed (Linux); SIGINT or SIGTERM also cancels submitit jobs.
-Preempted Slurm array tasks are requeued and resume the same way. The sweep CSVs, tables and figures
-go to <results>.
+Run directories are <root>/<env>__<variant>__s<seed>, logs <root>/logs/<run>.log. Every argument is
+checked before anything is trained (one line, exit 2). Rerunning the same command skips every run whose
+final checkpoint exists, resumes a half-finished run from its last checkpoint (bit for bit, see the
+training scripts' --resume) and skips every finished sweep cell, so killing the launcher loses at most
+the work since each run's last checkpoint: its local training children die with it, even when it is
+SIGKILLed (Linux); SIGINT or SIGTERM also cancels submitit jobs. Preempted Slurm array tasks are
+requeued and resume the same way. The sweep CSVs, tables and figures go to <results>.
 """
 
-import ctypes
-import fcntl
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import dataclass
-from functools import cache
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Annotated, Literal
 
-import gymnasium as gym
 import tyro
 
 import eval_gamma_sweep
 import plot_results
-import ppo_pgg_continuous
-import ppo_pgg_discrete
-from pgg_utils import runs
+from pgg_utils import paper, processes, runs
+from pgg_utils.arguments import guidance_error
+from pgg_utils.files import InputError, lock_holder, write_atomic
+from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
-VARIANTS = {"ppo": (1.0, 0.0), "pgg_g1.1": (1.1, 0.0), "pgg_drop0.1": (1.0, 0.1)}
-CONTINUOUS_TASKS = ("HalfCheetah-v4", "Hopper-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4")
+SCRIPTS = {"discrete": ROOT / "ppo_pgg_discrete.py", "continuous": ROOT / "ppo_pgg_continuous.py"}
 
 
 @dataclass(frozen=True)
@@ -56,23 +53,14 @@ class Preset:
     episodes: int
 
 
+VARIANT_IDS = tuple(paper.VARIANTS)
 PRESETS = {
-    "quick": Preset(("CartPole-v1",), 2, tuple(VARIANTS), 50_000, 25_000, (1.0, 2.0, 5.0), 20),
-    "discrete": Preset(("CartPole-v1", "Acrobot-v1"), 5, tuple(VARIANTS), None, None, None, 50),
-    "continuous": Preset(CONTINUOUS_TASKS, 5, tuple(VARIANTS), None, None, None, 50),
+    "quick": Preset(("CartPole-v1",), 2, VARIANT_IDS, 50_000, 25_000, (1.0, 2.0, 5.0), 20),
+    "discrete": Preset(paper.PAPER_ENVS["discrete"], paper.PAPER_SEEDS, VARIANT_IDS, None, None, None, 50),
+    "continuous": Preset(paper.PAPER_ENVS["continuous"], paper.PAPER_SEEDS, VARIANT_IDS, None, None, None, 50),
 }
 RUNNING: set[subprocess.Popen] = set()  # training children, ended with the launcher
 SUBMITTED: list = []  # submitit jobs (the same), cancelled by SIGINT / SIGTERM
-
-
-@cache
-def training_module(env_id: str):
-    """The training script for this env's action space."""
-    env = gym.make(env_id)
-    discrete = isinstance(env.action_space, gym.spaces.Discrete)
-    env.close()
-    return ppo_pgg_discrete if discrete else ppo_pgg_continuous
-
 
 # The help of a flag whose None means "take it from the preset" (tyro would print "(default: None)").
 FROM_PRESET = tyro.conf.arg(help_behavior_hint="(default: the preset's)")
@@ -87,7 +75,7 @@ class Args:
     """environments"""
     seeds: Annotated[int | None, FROM_PRESET] = None
     """number of seeds, 1..N"""
-    variants: Annotated[tuple[Literal["ppo", "pgg_g1.1", "pgg_drop0.1"], ...] | None, FROM_PRESET] = None
+    variants: Annotated[tuple[Literal[VARIANT_IDS], ...] | None, FROM_PRESET] = None
     """training variants (every preset has all three)"""
     total_timesteps: Annotated[int | None, FROM_PRESET_OR_PAPER] = None
     """training steps per run"""
@@ -117,13 +105,53 @@ class Args:
     """train with --compile (needs a C++ compiler): ~1.25x faster training, whose compile pays back after ~45k Hopper steps with inductor's cache warm, ~210k cold (benchmarks/README.md)"""
 
 
+def settings(args: Args) -> Preset:
+    """The grid's settings: each flag that was given, else the preset's (`is None`, so a given 0 stays 0
+    and is refused rather than replaced)."""
+    preset = PRESETS[args.preset]
+    return Preset(**{f.name: getattr(preset, f.name) if getattr(args, f.name) is None else getattr(args, f.name)
+                     for f in fields(Preset)})  # fmt: skip
+
+
+def argument_error(args: Args) -> str | None:
+    """The first bad argument as one line, or None: the training scripts' and the sweep's rules, checked
+    here before anything is trained or written, so that no run of the grid fails on them hours later."""
+    chosen = settings(args)
+    for flag, values in (("--envs", chosen.envs), ("--variants", chosen.variants), ("--gammas", chosen.gammas)):
+        if values is not None and not values:
+            return f"{flag} needs at least one value"
+        if values is not None and len(set(values)) < len(values):  # two runs would share a run directory
+            return f"{flag} lists a value twice: {' '.join(map(str, values))}"
+    for flag, value in (("--seeds", chosen.seeds), ("--total-timesteps", chosen.total_timesteps),
+                        ("--checkpoint-interval", chosen.checkpoint_interval), ("--episodes", chosen.episodes),
+                        ("--workers", args.workers), ("--slurm-time-min", args.slurm_time_min),
+                        ("--slurm-array-parallelism", args.slurm_array_parallelism)):  # fmt: skip
+        if value is not None and value <= 0:
+            return f"{flag} must be positive, got {value}"
+    for gamma in chosen.gammas or ():
+        if error := guidance_error(gamma, "--gammas"):
+            return error
+    for env_id in chosen.envs:
+        try:
+            kind = paper.action_kind(env_id)
+        except ValueError as e:
+            return f"--envs: {e}"
+        if error := runs.env_error(env_id, kind):
+            return f"--envs: {error}"
+        batch = paper.REFERENCE_ARGS[kind]["num_envs"] * paper.REFERENCE_ARGS[kind]["num_steps"]
+        if chosen.checkpoint_interval is not None and chosen.checkpoint_interval < batch:
+            return (f"--checkpoint-interval must be at least one batch of {env_id}'s training script, "
+                    f"num_envs * num_steps = {batch}, got {chosen.checkpoint_interval}")  # fmt: skip
+    return None
+
+
 @dataclass(frozen=True)
 class RunSpec:
     env_id: str
     variant: str
     seed: int
     root: str
-    total_timesteps: int | None
+    total_timesteps: int | None  # None: the script's default
     checkpoint_interval: int | None
     compile: bool = False
 
@@ -132,104 +160,74 @@ class RunSpec:
         return f"{self.env_id}__{self.variant}__s{self.seed}"
 
     @property
+    def run_dir(self) -> Path:
+        return Path(self.root) / self.name
+
+    @property
     def final_checkpoint(self) -> Path:
-        module = training_module(self.env_id)
-        total = self.total_timesteps or module.Args().total_timesteps
-        return runs.checkpoint_path(Path(self.root) / self.name, total)
+        kind = paper.action_kind(self.env_id)
+        total = paper.REFERENCE_ARGS[kind]["total_timesteps"] if self.total_timesteps is None else self.total_timesteps
+        return runs.checkpoint_path(self.run_dir, total)
 
     @property
     def log(self) -> Path:
         return Path(self.root) / "logs" / f"{self.name}.log"
 
+    def last_step(self) -> int | None:
+        """The step of the run's last checkpoint; None where it has none (nothing to resume or sweep)."""
+        latest = runs.latest_checkpoint(self.run_dir)
+        return None if latest is None else runs.checkpoint_step(latest)
+
     def command(self) -> list[str]:
-        guidance, dropout = VARIANTS[self.variant]
-        script = ROOT / f"{training_module(self.env_id).__name__}.py"
-        cmd = [sys.executable, str(script), "--env-id", self.env_id, "--seed", str(self.seed),
-               "--guidance", str(guidance), "--cond-dropout", str(dropout), "--output-dir", self.root,
-               "--run-name", self.name, "--torch-threads", "1"]  # fmt: skip
-        if self.total_timesteps:
+        guidance, dropout = paper.VARIANTS[self.variant]
+        cmd = [sys.executable, str(SCRIPTS[paper.action_kind(self.env_id)]), "--env-id", self.env_id,
+               "--seed", str(self.seed), "--guidance", str(guidance), "--cond-dropout", str(dropout),
+               "--output-dir", self.root, "--run-name", self.name, "--torch-threads", "1"]  # fmt: skip
+        if self.total_timesteps is not None:
             cmd += ["--total-timesteps", str(self.total_timesteps)]
-        if self.checkpoint_interval:
+        if self.checkpoint_interval is not None:
             cmd += ["--checkpoint-interval", str(self.checkpoint_interval)]
         if self.compile:
             cmd.append("--compile")
         return cmd
 
 
-LIBC = ctypes.CDLL(None, use_errno=True) if sys.platform == "linux" else None  # loaded here, not after fork
-
-
-def die_with(parent: int):
-    """For a child before exec (preexec_fn): the kernel kills it when the thread that started it ends,
-    which a launcher killed by SIGKILL cannot arrange itself (Linux; elsewhere only SIGINT/SIGTERM
-    do). If the launcher died before the signal was set, the child is already an orphan: it exits.
-    Only an async-signal-safe system call and getppid run between fork and exec."""
-
-    def set_death_signal() -> None:
-        if LIBC is not None:
-            LIBC.prctl(1, signal.SIGKILL)  # 1: PR_SET_PDEATHSIG
-            if os.getppid() != parent:
-                os._exit(1)
-
-    return set_death_signal
-
-
 def train_one(spec: RunSpec) -> None:
-    """Trains (or resumes) one run in a child process pinned to one thread; raises with the log's path
-    on failure. The function every executor runs, so local and cluster runs share one code path. The
-    child is started and waited for in this thread, which its death signal is tied to."""
+    """Trains (or resumes) one run in a child process pinned to one thread; raises on failure. The
+    function every executor runs, so local and cluster runs share one code path. The child is started
+    and waited for in this thread, which its death signal is tied to; if the wait is cut short (a
+    preempted submitit job exits, Ctrl-C), the child is killed and reaped first, so that the run's lock
+    is free for the requeued job that resumes it."""
     spec.log.parent.mkdir(parents=True, exist_ok=True)
     env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", PYTHONUNBUFFERED="1")
     with open(spec.log, "a") as log:
         child = subprocess.Popen(
-            [*spec.command(), "--resume"], stdout=log, stderr=subprocess.STDOUT, env=env, preexec_fn=die_with(os.getpid())
+            [*spec.command(), "--resume"],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            env=env,
+            preexec_fn=processes.child_of(os.getpid()),  # noqa: PLW1509  only prctl and getppid run in it
         )
         RUNNING.add(child)
-        code = child.wait()
-        RUNNING.discard(child)
-    if code != 0 or not spec.final_checkpoint.exists():
-        raise RuntimeError(f"{spec.name} failed (exit {code}); log: {spec.log}")
-
-
-def grid(args: Args) -> list[RunSpec]:
-    preset = PRESETS[args.preset]
-    root = args.root or f"runs/{args.preset}"
-    return [
-        RunSpec(env, variant, seed, root, args.total_timesteps or preset.total_timesteps,
-                args.checkpoint_interval or preset.checkpoint_interval, args.compile)  # fmt: skip
-        for env in (args.envs or preset.envs)
-        for seed in range(1, (args.seeds or preset.seeds) + 1)
-        for variant in (args.variants or preset.variants)
-    ]
-
-
-class Progress:
-    def __init__(self, total: int, already_done: int):
-        self.total, self.done, self.failed, self.running = total, already_done, [], 0
-        self.durations: list[float] = []
-        self.workers = 1
-
-    def line(self) -> str:
-        remaining = self.total - self.done - len(self.failed)
-        if self.durations and remaining:
-            eta = eval_gamma_sweep.format_duration(sum(self.durations) / len(self.durations) * remaining / self.workers)
-        else:
-            eta = "unknown" if remaining else "0m00s"
-        return f"runs: {self.done}/{self.total} done, {self.running} running, {len(self.failed)} failed, ETA {eta}"
-
-    def show(self) -> None:
-        print(self.line(), file=sys.stderr, flush=True)
+        try:
+            code = child.wait()
+        finally:
+            child.kill()
+            child.wait()
+            RUNNING.discard(child)
+    if code != 0:
+        raise RuntimeError(f"{spec.name}: training exited with status {code}")
+    if not spec.final_checkpoint.exists():
+        raise RuntimeError(f"{spec.name}: training ended without its final checkpoint {spec.final_checkpoint.name}")
 
 
 class TrainingTask:
-    """train_one, timed: returns the run's wall time. Submitit calls `checkpoint` when Slurm preempts
-    an array task or its time runs out; the task is requeued and, as train_one passes --resume,
-    continues from the run's last checkpoint."""
+    """train_one as a submitit callable. Submitit calls `checkpoint` when Slurm preempts an array task
+    or its time runs out; the task is requeued and, as train_one passes --resume, continues from the
+    run's last checkpoint. Jobs unpickle it as `reproduce.TrainingTask` (see importable_by_jobs)."""
 
-    def __call__(self, spec: RunSpec) -> float:
-        start = time.time()
+    def __call__(self, spec: RunSpec) -> None:
         train_one(spec)
-        return time.time() - start
 
     def checkpoint(self, spec: RunSpec):
         import submitit
@@ -237,32 +235,71 @@ class TrainingTask:
         return submitit.helpers.DelayedSubmission(self, spec)
 
 
-def run_local(todo: list[RunSpec], progress: Progress, workers: int) -> None:
-    progress.workers = workers
+def grid(args: Args) -> list[RunSpec]:
+    chosen = settings(args)
+    root = args.root or f"runs/{args.preset}"
+    return [RunSpec(env, variant, seed, root, chosen.total_timesteps, chosen.checkpoint_interval, args.compile)
+            for env in chosen.envs for seed in range(1, chosen.seeds + 1) for variant in chosen.variants]  # fmt: skip
+
+
+def grid_state(specs: list[RunSpec]) -> str:
+    """What this launch skips, resumes and starts: `6 runs in the grid: 1 trained, 1 half done (name at
+    step 4,096), 4 not started`."""
+    trained = [s for s in specs if s.final_checkpoint.exists()]
+    half_done = [(s.name, step) for s in specs if s not in trained and (step := s.last_step()) is not None]
+    at = f" ({', '.join(f'{name} at step {step:,}' for name, step in half_done)})" if half_done else ""
+    return (f"{len(specs)} runs in the grid: {len(trained)} trained, {len(half_done)} half done{at}, "
+            f"{len(specs) - len(trained) - len(half_done)} not started")  # fmt: skip
+
+
+class Tally:
+    """The grid's runs as they end, on pgg_utils' progress display (its ETA at this launch's rate)."""
+
+    def __init__(self, total: int, trained: int):
+        self.done, self.failed = trained, []  # failed: (spec, the log that says why, None where none was written)
+        self.progress = Progress("runs", total, trained, unit="ended", interval=0, stream=sys.stderr)
+
+    def show(self, details: str) -> None:
+        self.progress.update(self.done + len(self.failed), f"{details}, {len(self.failed)} failed")
+
+    def record(self, spec: RunSpec, error: BaseException | str | None = None, log: Path | None = None) -> None:
+        if error is None:
+            self.done += 1
+        else:
+            self.failed.append((spec, log))
+            print(f"FAILED {spec.name}: {error}{f'; log: {log}' if log else ''}", file=sys.stderr, flush=True)
+
+
+def run_local(todo: list[RunSpec], tally: Tally, workers: int) -> None:
     with ThreadPoolExecutor(workers) as pool:
-        started = {pool.submit(TrainingTask(), spec): spec for spec in todo}
-        progress.running = min(workers, len(todo))
-        progress.show()
+        started = {pool.submit(train_one, spec): spec for spec in todo}
         pending = set(started)
+        tally.show(f"{min(workers, len(pending))} running")
         while pending:
             finished, pending = wait(pending, return_when=FIRST_COMPLETED)
             for future in finished:
-                error = future.exception()
-                record(progress, started[future], error, 0.0 if error else future.result())
-            progress.running = min(workers, len(pending))
-            progress.show()
+                spec = started[future]
+                tally.record(spec, future.exception(), spec.log if spec.log.exists() else None)
+            tally.show(f"{min(workers, len(pending))} running")
 
 
-def record(progress: Progress, spec: RunSpec, error: BaseException | None, seconds: float) -> None:
-    if error is None:
-        progress.done += 1
-        progress.durations.append(seconds)
-    else:
-        progress.failed.append(spec)
-        print(f"FAILED {spec.name}: {error}", file=sys.stderr, flush=True)
+@contextlib.contextmanager
+def importable_by_jobs():
+    """Jobs unpickle reproduce.TrainingTask and reproduce.RunSpec, so `import reproduce` must work in them
+    wherever the launcher was started: ROOT leads PYTHONPATH while they are submitted, in the environment
+    that submitit's local controller copies and sbatch exports (its default, --export=ALL)."""
+    before = os.environ.get("PYTHONPATH")
+    os.environ["PYTHONPATH"] = os.pathsep.join([str(ROOT), *([before] if before else [])])
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ["PYTHONPATH"]
+        else:
+            os.environ["PYTHONPATH"] = before
 
 
-def run_submitit(todo: list[RunSpec], progress: Progress, args: Args) -> None:
+def run_submitit(todo: list[RunSpec], tally: Tally, args: Args) -> None:
     import submitit
 
     folder = Path(todo[0].root) / "submitit"
@@ -270,86 +307,70 @@ def run_submitit(todo: list[RunSpec], progress: Progress, args: Args) -> None:
         executor = submitit.AutoExecutor(folder=folder, cluster="slurm")
         executor.update_parameters(timeout_min=args.slurm_time_min, cpus_per_task=1, slurm_partition=args.slurm_partition,
                                    slurm_array_parallelism=args.slurm_array_parallelism)  # fmt: skip
-        progress.workers = args.slurm_array_parallelism
     else:
         executor = submitit.LocalExecutor(folder=folder)
         executor.update_parameters(timeout_min=args.slurm_time_min)
-        progress.workers = len(todo)
-    jobs = executor.map_array(TrainingTask(), todo)
+    with importable_by_jobs():
+        jobs = executor.map_array(TrainingTask(), todo)
     SUBMITTED.extend(jobs)
-    pending = dict(zip(jobs, todo))
+    pending = dict(zip(jobs, todo, strict=True))
+    tally.show(f"{len(pending)} in progress")
     while pending:
-        progress.running = len(pending)
-        progress.show()
         time.sleep(1.0)
-        for job in [j for j in pending if j.done()]:
+        finished = [job for job in pending if job.done()]
+        for job in finished:
             spec = pending.pop(job)
             try:
-                record(progress, spec, None, job.result())
-            except Exception as e:  # submitit wraps the child's exception in its own type
-                record(progress, spec, RuntimeError(f"{e}".strip().splitlines()[-1] + f"; log: {spec.log}"), 0)
-    progress.running = 0
-    progress.show()
-
-
-def reproduce(args: Args) -> int:
-    """Returns the number of failed runs."""
-    specs = grid(args)
-    results = Path(args.results or f"results/{args.preset}")
-    plot_results.check_writable(results)  # before hours of training, not after
-    todo = [s for s in specs if not s.final_checkpoint.exists()]
-    progress = Progress(len(specs), len(specs) - len(todo))
-    print(f"{len(specs)} runs in the grid, {len(specs) - len(todo)} already trained", file=sys.stderr)
-    if todo and not args.skip_training:
-        if args.executor == "local":
-            run_local(todo, progress, args.workers)
-        else:
-            run_submitit(todo, progress, args)
-
-    preset = PRESETS[args.preset]
-    root = Path(specs[0].root)
-    trained = sorted({str(root / s.name) for s in specs if s.final_checkpoint.parent.exists()})
-    if not trained:
-        raise eval_gamma_sweep.InputError("no run has any checkpoint to sweep")
-    unfinished = [unfinished_note(s) for s in specs if s.final_checkpoint.parent.exists() and not s.final_checkpoint.exists()]
-    if unfinished:
-        print(f"note: unfinished, so swept up to the last checkpoint: {'; '.join(unfinished)}", file=sys.stderr)
-    sweep_args = eval_gamma_sweep.Args(
-        paths=tuple(trained), output=str(root / "sweep"), gammas=args.gammas or preset.gammas,
-        episodes=args.episodes or preset.episodes, workers=args.workers,
-    )  # fmt: skip
-    sweep_dir = eval_gamma_sweep.sweep(sweep_args)
-    results.mkdir(parents=True, exist_ok=True)
-    for name in ("episodes.csv", "summary.csv"):
-        copy_atomic(sweep_dir / name, results / name)
-    written = plot_results.generate(
-        plot_results.Args(sweeps=(str(results),), output=str(results), runs=tuple(trained), compare_paper=True)
-    )
-    print(f"results in {results}: {len(written)} files", file=sys.stderr)
-    for spec in progress.failed:
-        print(f"failed: {spec.name}, log {spec.log}", file=sys.stderr)
-    return len(progress.failed)
+                job.result()
+                tally.record(spec)
+            except Exception as e:  # noqa: BLE001  submitit wraps the job's exception, whatever it was, in its own
+                # The run's log, unless the job failed before train_one opened it: then submitit's own.
+                tally.record(spec, str(e).strip().splitlines()[-1], spec.log if spec.log.exists() else job.paths.stderr)
+        if finished:
+            tally.show(f"{len(pending)} in progress")
 
 
 def unfinished_note(spec: RunSpec) -> str:
     """`name (last checkpoint's step)`, and who is training it now where its run directory is locked."""
-    run_dir = Path(spec.root) / spec.name
-    latest = runs.latest_checkpoint(run_dir)
-    note = f"{spec.name} ({int(latest.stem.split('_')[1]):,}" if latest else f"{spec.name} (no checkpoint"
-    lock = run_dir / ".lock"
-    if lock.exists():
-        with open(lock) as handle:
-            try:
-                fcntl.flock(handle, fcntl.LOCK_SH | fcntl.LOCK_NB)
-            except BlockingIOError:
-                note += f", being trained now by pid {handle.read().strip() or 'unknown'}"
-    return note + ")"
+    holder = lock_holder(spec.run_dir)
+    return f"{spec.name} ({spec.last_step():,}{f', being trained now by pid {holder}' if holder else ''})"
 
 
-def copy_atomic(source: Path, destination: Path) -> None:
-    tmp = destination.with_name(destination.name + ".tmp")
-    tmp.write_bytes(source.read_bytes())
-    os.replace(tmp, destination)
+def reproduce(args: Args) -> int:
+    """Returns the number of failed runs; InputError (one line) for bad arguments, before anything is written."""
+    if error := argument_error(args):
+        raise InputError(error)
+    specs = grid(args)
+    results = Path(args.results or f"results/{args.preset}")
+    plot_results.check_writable(results)  # before hours of training, not after
+    todo = [s for s in specs if not s.final_checkpoint.exists()]
+    print(grid_state(specs), file=sys.stderr)
+    tally = Tally(len(specs), len(specs) - len(todo))
+    if todo and not args.skip_training:
+        if args.executor == "local":
+            run_local(todo, tally, args.workers)
+        else:
+            run_submitit(todo, tally, args)
+        tally.progress.close()
+
+    swept = [s for s in specs if s.last_step() is not None]
+    if not swept:
+        raise InputError("no run has any checkpoint to sweep")
+    unfinished = [unfinished_note(s) for s in swept if not s.final_checkpoint.exists()]
+    if unfinished:
+        print(f"note: unfinished, so swept up to the last checkpoint: {'; '.join(unfinished)}", file=sys.stderr)
+    chosen = settings(args)
+    sweep_args = eval_gamma_sweep.Args(paths=tuple(str(s.run_dir) for s in swept), output=str(Path(specs[0].root) / "sweep"),
+                                       gammas=chosen.gammas, episodes=chosen.episodes, workers=args.workers)  # fmt: skip
+    sweep_dir = eval_gamma_sweep.sweep(sweep_args)
+    for name in ("episodes.csv", "summary.csv"):
+        write_atomic(results / name, (sweep_dir / name).read_bytes())
+    written = plot_results.generate(plot_results.Args(sweeps=(str(results),), output=str(results),
+                                                      runs=sweep_args.paths, compare_paper=True))  # fmt: skip
+    print(f"results in {results}: {len(written)} files", file=sys.stderr)
+    for spec, log in tally.failed:
+        print(f"failed: {spec.name}{f', log {log}' if log else ''}", file=sys.stderr)
+    return len(tally.failed)
 
 
 def main() -> None:
@@ -363,7 +384,7 @@ def main() -> None:
         for job in SUBMITTED:
             try:
                 job.cancel(check=False)
-            except Exception:  # a job that already ended, or a scheduler that is gone
+            except Exception:  # noqa: BLE001, S110  a job that already ended, or a scheduler that is gone
                 pass
         os._exit(128 + signum)
 
@@ -371,7 +392,7 @@ def main() -> None:
     signal.signal(signal.SIGINT, stop)
     try:
         failed = reproduce(args)
-    except (eval_gamma_sweep.InputError, plot_results.InputError) as e:
+    except (InputError, eval_gamma_sweep.InputError, plot_results.InputError) as e:
         print(f"error: {e}", file=sys.stderr)
         sys.exit(2)
     except OSError as e:  # e.g. a full disk while writing results; finished runs and cells stay
@@ -381,4 +402,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    # Run as the module `reproduce`, not `__main__`: submitit pickles TrainingTask and RunSpec by their
+    # module's name, and a job can import `reproduce` but has no `__main__` of ours.
+    import reproduce
+
+    reproduce.main()

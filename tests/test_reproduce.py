@@ -1,14 +1,17 @@
 import os
+import signal
 import subprocess
 import sys
 import time
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
-
-import ppo_pgg_discrete
-import reproduce
 from conftest import ROOT
+
+import reproduce
+from pgg_utils import runs
+from pgg_utils.files import lock_directory
 
 TINY = ["--total-timesteps", "2048", "--checkpoint-interval", "1024", "--seeds", "2", "--variants", "ppo", "pgg_g1.1",
         "--gammas", "1", "2", "--episodes", "3"]  # fmt: skip
@@ -59,7 +62,9 @@ def processes_mentioning(text: str) -> list[int]:
     return found
 
 
-@pytest.mark.skipif(sys.platform != "linux", reason="children die with a SIGKILLed launcher through Linux's PR_SET_PDEATHSIG")
+@pytest.mark.skipif(
+    sys.platform != "linux", reason="children die with a SIGKILLed launcher through Linux's PR_SET_PDEATHSIG"
+)
 def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_uninterrupted_grid(tmp_path):
     """Fault injection: SIGKILL to the launcher alone while a run is between checkpoints. Its training
     child dies with it; the rerun resumes that run from its last checkpoint (bit for bit) and skips the
@@ -71,7 +76,9 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
         return [sys.executable, str(ROOT / "reproduce.py"), *grid, "--root", str(tmp_path / name / "runs"),
                 "--results", str(tmp_path / name / "results")]  # fmt: skip
 
-    reference = subprocess.run(command("straight"), capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    reference = subprocess.run(
+        command("straight"), capture_output=True, text=True, cwd=tmp_path, timeout=600, check=False
+    )
     assert reference.returncode == 0, reference.stderr[-2000:]
 
     root = tmp_path / "killed" / "runs"
@@ -88,9 +95,9 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
         time.sleep(0.1)
     assert processes_mentioning(str(root)) == [], "a training child outlived the launcher"
 
-    rerun = subprocess.run(command("killed"), capture_output=True, text=True, cwd=tmp_path, timeout=600)
+    rerun = subprocess.run(command("killed"), capture_output=True, text=True, cwd=tmp_path, timeout=600, check=False)
     assert rerun.returncode == 0, rerun.stderr[-2000:]
-    assert "1 already trained" in rerun.stderr
+    assert "2 runs in the grid: 1 trained, 1 half done (CartPole-v1__pgg_g1.1__s1 at step " in rerun.stderr
     assert "resuming from" in (root / "logs" / "CartPole-v1__pgg_g1.1__s1.log").read_text()
     for name in ("episodes.csv", "summary.csv"):
         straight = (tmp_path / "straight" / "results" / name).read_text()
@@ -124,7 +131,7 @@ def test_sweeping_an_unfinished_run_is_said_with_its_last_step_and_its_trainer(t
     run = tmp_path / "partial" / "runs" / "CartPole-v1__ppo__s2"
     (run / "checkpoints" / "step_000002048.pt").unlink()
     capsys.readouterr()
-    lock = ppo_pgg_discrete.lock_directory(run)  # as a trainer still at work on it would hold it
+    lock = lock_directory(run)  # as a trainer still at work on it would hold it
     try:
         assert reproduce.reproduce(replace(args, skip_training=True)) == 0
     finally:
@@ -136,3 +143,107 @@ def test_sweeping_an_unfinished_run_is_said_with_its_last_step_and_its_trainer(t
     assert "CartPole-v1__ppo__s2 (1,024)" in capsys.readouterr().err
     episodes = (tmp_path / "partial" / "results" / "episodes.csv").read_text().splitlines()
     assert len(episodes) - 1 == (2 + 1) * 2 * 3  # s1: two checkpoints, s2: one; × γ × episodes
+
+
+def test_submitit_local_executor_works_when_launched_as_a_command(tmp_path):
+    """The jobs unpickle reproduce.TrainingTask, not __main__'s, and import it from anywhere: the command
+    runs from a directory that does not hold reproduce.py."""
+    command = [sys.executable, str(ROOT / "reproduce.py"), "--executor", "submitit-local", "--envs", "CartPole-v1",
+               "--seeds", "1", "--variants", "ppo", "--total-timesteps", "2048", "--checkpoint-interval", "1024",
+               "--episodes", "2", "--gammas", "1", "2", "--root", str(tmp_path / "grid"),
+               "--results", str(tmp_path / "results")]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=600, check=False)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert (tmp_path / "grid" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000002048.pt").exists()
+    assert len((tmp_path / "results" / "episodes.csv").read_text().splitlines()) - 1 == 2 * 2 * 2
+    assert (tmp_path / "results" / "table_discrete.md").exists()
+
+
+def children_of(pid: int) -> list[int]:
+    found = []
+    for entry in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{entry}/stat") as f:
+                if int(f.read().rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry))
+        except (OSError, ValueError, IndexError):
+            continue
+    return found
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="finds the job's task process through /proc")
+def test_preempted_submitit_job_is_requeued_and_resumes_from_its_last_checkpoint(tmp_path):
+    """Slurm's preemption signal (SIGUSR2) to the job's task between checkpoints, as submitit's local
+    controller sends it before a timeout: submitit calls TrainingTask.checkpoint, the job is requeued,
+    and the requeued task resumes the run from its last checkpoint to the end."""
+    import submitit
+
+    spec = reproduce.RunSpec("CartPole-v1", "ppo", 1, str(tmp_path / "runs"), 32768, 2048)
+    executor = submitit.LocalExecutor(folder=tmp_path / "submitit")
+    executor.update_parameters(timeout_min=60)  # far from it: a preemption, not a timeout
+    with reproduce.importable_by_jobs():
+        job = executor.submit(reproduce.TrainingTask(), spec)
+    first = runs.checkpoint_path(spec.run_dir, 2048)
+    deadline = time.time() + 300
+    while not first.exists() and time.time() < deadline:
+        time.sleep(0.02)
+    (task,) = children_of(job._process.pid)
+    assert not spec.final_checkpoint.exists(), "preempted too late"
+    os.kill(task, signal.SIGUSR2)
+    deadline = time.time() + 300
+    while not job.done() and time.time() < deadline:
+        time.sleep(0.1)
+    job.result()
+    assert "this job is preempted" in job.stdout() and "Requeued job" in job.stdout()
+    log = spec.log.read_text()
+    assert f"resuming from {spec.run_dir}/checkpoints/step_" in log
+    assert spec.final_checkpoint.exists()
+    assert processes_mentioning(str(spec.run_dir)) == [], "the preempted task's training child outlived it"
+
+
+def test_a_job_that_fails_before_its_log_exists_is_reported_with_submitits_log(tmp_path, capsys):
+    root = tmp_path / "failing" / "runs"
+    root.mkdir(parents=True)
+    (root / "logs").write_text("")  # a file where the logs' directory goes: train_one fails before any log
+    args = tiny_args(tmp_path, "failing", executor="submitit-local", seeds=1, variants=("ppo",))
+    with pytest.raises(reproduce.InputError, match="no run has any checkpoint to sweep"):
+        reproduce.reproduce(args)
+    (failed,) = [line for line in capsys.readouterr().err.splitlines() if line.startswith("FAILED")]
+    assert failed.startswith("FAILED CartPole-v1__ppo__s1: ") and "; log: " in failed
+    log = failed.split("; log: ")[-1]
+    assert log.startswith(str(root / "submitit")) and log.endswith(".err") and "Error" in Path(log).read_text()
+
+
+def test_the_launch_counts_trained_half_done_and_not_started_runs(tmp_path):
+    specs = reproduce.grid(tiny_args(tmp_path, "state", variants=("ppo",), seeds=3))
+    for spec, steps in zip(specs, ((1024, 2048), (1024,), ()), strict=True):
+        for step in steps:
+            runs.checkpoint_path(spec.run_dir, step).parent.mkdir(parents=True, exist_ok=True)
+            runs.checkpoint_path(spec.run_dir, step).touch()
+    assert reproduce.grid_state(specs) == (
+        "3 runs in the grid: 1 trained, 1 half done (CartPole-v1__ppo__s2 at step 1,024), 1 not started"
+    )
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--envs", "CartPol-v1"], "error: --envs: cannot make environment 'CartPol-v1'"),
+        (["--seeds", "-1"], "error: --seeds must be positive, got -1"),
+        (["--seeds", "0"], "error: --seeds must be positive, got 0"),
+        (["--workers", "0"], "error: --workers must be positive, got 0"),
+        (["--total-timesteps", "0"], "error: --total-timesteps must be positive, got 0"),
+        (["--episodes", "0"], "error: --episodes must be positive, got 0"),
+        (["--checkpoint-interval", "0"], "error: --checkpoint-interval must be positive, got 0"),
+        (["--checkpoint-interval", "256"], "error: --checkpoint-interval must be at least one batch"),
+        (["--gammas", "1", "nan"], "error: --gammas must be a number in [0, 1000], got nan"),
+        (["--variants", "ppo", "ppo"], "error: --variants lists a value twice"),
+    ],
+)
+def test_bad_arguments_are_one_line_and_exit_2_before_anything_is_created(tmp_path, flags, message):
+    command = [sys.executable, str(ROOT / "reproduce.py"), *flags, "--root", str(tmp_path / "runs"),
+               "--results", str(tmp_path / "results")]  # fmt: skip
+    done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=120, check=False)
+    assert done.returncode == 2 and len(done.stderr.splitlines()) == 1, done.stderr
+    assert done.stderr.startswith(message), done.stderr
+    assert sorted(os.listdir(tmp_path)) == []
