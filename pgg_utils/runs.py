@@ -33,7 +33,6 @@ from pgg_utils.progress import Progress
 CHECKPOINT_FORMAT_VERSION = 2
 READABLE_FORMAT_VERSIONS = (1, 2)
 CHECKPOINT_GLOB = "step_*.pt"
-PACKAGE_DIR = Path(__file__).resolve().parent
 
 
 def argument_error(args, kind: str) -> str | None:
@@ -147,9 +146,10 @@ def package_versions() -> dict[str, str | None]:
 
 
 def code_revision(script: Path) -> dict:
-    """The training code of a run: the git commit of its checkout where there is one (and whether its
-    files differ from it), and always the sha1 of the script and of this package's sources."""
-    files = [Path(script).resolve(), *sorted(PACKAGE_DIR.glob("*.py"))]
+    """The training code of a run, the script and the pgg_utils modules it loaded: the git commit of
+    its checkout where there is one (and whether those files differ from it), and always their sha1."""
+    package = sorted(Path(m.__file__).resolve() for name, m in list(sys.modules.items()) if name.startswith("pgg_utils.") and m.__file__)
+    files = [Path(script).resolve(), *package]
     digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()
     commit = modified = None
     try:
@@ -160,7 +160,7 @@ def code_revision(script: Path) -> dict:
             modified = bool(status.stdout.strip())
     except (OSError, subprocess.SubprocessError):  # no git, or not a checkout
         commit = None
-    return {"commit": commit, "modified": modified, "sha1": digest}
+    return {"commit": commit, "modified": modified, "sha1": digest, "files": [f.name for f in files]}
 
 
 def non_finite(state: dict) -> list[str]:

@@ -161,6 +161,9 @@ def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
 def test_checkpoint_records_the_software_stack(tmp_path):
     ckpt = checkpoint(train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
     assert ckpt["versions"]["torch"] == torch.__version__ and ckpt["versions"]["gymnasium"]
+    # The training code: the script and the pgg_utils modules it ran, by commit and by content.
+    assert len(ckpt["code"]["sha1"]) == 40 and ckpt["code"]["files"][0] == "ppo_pgg_discrete.py" and "runs.py" in ckpt["code"]["files"]
+    assert ckpt["code"]["commit"] is None or len(ckpt["code"]["commit"]) == 40
 
 
 # --- a run directory is never destroyed or shared ------------------------------------------------
