@@ -27,26 +27,26 @@ on the AMD EPYC this was developed on, and within ~1e-7 relative (tested to rtol
 rounds by row count; over long MuJoCo episodes such differences can grow.
 
 Configurations. A cell's seeds must be distinct runs of one training configuration. Every row
-carries `config` (config_label: the variant and every training argument that differs from the
-training script's defaults, e.g. `pgg_g1.1 learning_rate=0.002`), summaries are grouped by it, and
-two checkpoints of one env, configuration, seed and step are an error naming both.
+carries `config` (config_label: the variant and every training argument that differs from the frozen
+reference, pgg_utils.paper.REFERENCE_ARGS, e.g. `pgg_g1.1 learning_rate=0.002`), summaries are
+grouped by it, and two checkpoints of one env, configuration, seed and step are an error naming both.
+Checkpoints whose model holds a NaN or an infinity are skipped (skipped.csv), never evaluated.
 
 Outputs (in --output, locked against a second sweep while this one runs): cells/*.csv, one per
 finished (checkpoint, γ) cell, written atomically and named by the bytes of the checkpoint that were
-evaluated, the γ and the settings; a rerun skips those cells, so an interrupted sweep (Ctrl-C: exit
-status 130) loses only the cells in flight. Then episodes.csv (every episode of the requested cells,
-sorted) and summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean
-return, and its 95% confidence interval, see `mean_ci95`).
+evaluated, the γ, the settings and the evaluation stack (the mujoco, gymnasium, numpy and torch
+versions, recorded in every row). A rerun reuses a cell only if it is whole and every row's checksum
+holds, so an interrupted sweep (Ctrl-C: exit status 130) loses only the cells in flight, and a
+damaged cell is evaluated again. Then episodes.csv (every episode of the requested cells, sorted) and
+summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean return, and
+its 95% confidence interval, see `mean_ci95`).
 """
 
 import csv
-import ctypes
-import dataclasses
-import fcntl
 import functools
 import hashlib
 import io
-import math
+import json
 import multiprocessing
 import os
 import signal
@@ -61,30 +61,36 @@ import gymnasium as gym
 import numpy as np
 import torch
 import tyro
-from scipy import stats
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import runs
-from pgg_utils.arguments import RUN_ONLY_ARGS, guidance_error
+from pgg_utils.arguments import guidance_error
+from pgg_utils.files import InputError, LockedError, lock_directory, read_csv, write_csv_atomic
+from pgg_utils.paper import PAPER_GAMMAS, REFERENCE_ARGS, is_mujoco, variant_id
+from pgg_utils.processes import die_with_parent
+from pgg_utils.progress import Progress, format_duration
+from pgg_utils.stats import mean_ci95
 
-PAPER_GAMMAS = {
-    "discrete": (1.0, 1.5, 2.0, 5.0, 10.0, 20.0),
-    "continuous": (1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.3, 1.5),
-}
 # Policy forwards run on at least this many rows (padded). CPU BLAS rounds a 1-3 row product differently
 # from a larger one, so the one-row sequential reference pads to it; on the AMD EPYC this was written on,
 # products of 8 or more rows round alike, and the reference equals the cells to the bit there.
 MIN_FORWARD_ROWS = 8
-# Part of every cell's identity; raised when a fix changes what a cell evaluates to, so that a rerun
-# recomputes cells from before it. 2: continuous actions clipped to the env's bounds. 3: each cell in
-# a batch of its own (its numbers no longer depend on the other cells), Gumbel noise in float64, and
-# the config column.
-EVALUATOR_REVISION = 3
+# Part of every cell's identity; raised when a fix changes what a cell evaluates to or holds, so that a
+# rerun recomputes cells from before it. 2: continuous actions clipped to the env's bounds. 3: each cell
+# in a batch of its own (its numbers no longer depend on the other cells), Gumbel noise in float64, and
+# the config column. 4: the evaluation stack and the action space in every row and a checksum per row
+# (cells of 3 have neither and could never be verified); returns and lengths are those of 3.
+EVALUATOR_REVISION = 4
+# The packages whose versions decide an episode's numbers (MuJoCo's physics, gymnasium's tasks and
+# wrappers, numpy's and torch's rounding): recorded in every row, and part of every cell's identity.
+STACK_COLUMNS = ["mujoco", "gymnasium", "numpy", "torch"]
 EPISODE_COLUMNS = [
     "env_id", "variant", "config", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
     "eval_guidance", "policy", "null_branch", "episode", "episode_seed", "return", "length",
+    *STACK_COLUMNS, "action_space",
 ]  # fmt: skip
+CELL_COLUMNS = [*EPISODE_COLUMNS, "checksum"]  # a cell file's: each row proves that it is whole and whose it is
 SUMMARY_COLUMNS = [
     "env_id", "variant", "config", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy", "null_branch",
     "n_seeds", "n_episodes", "mean", "ci95", "ci_low", "ci_high", "ci_method", "seed_means",
@@ -121,10 +127,6 @@ class Args:
     """with --video: the episode to record, k (reset seed eval_seed + k and the action noise of a sweep cell's episode k)"""
 
 
-class InputError(Exception):
-    """Bad input: reported as one line, exit status 2."""
-
-
 # --- checkpoints ----------------------------------------------------------------------------------
 
 
@@ -133,15 +135,18 @@ TRAINING_MODULES = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuo
 
 def read_checkpoint(path: Path) -> tuple[str, dict]:
     """(sha1 of the file's bytes, checkpoint dict), both from one read of the file: what is evaluated
-    is exactly what is hashed. ValueError if it is not a checkpoint of either training script."""
+    is exactly what is hashed. ValueError with one line if it is not a checkpoint of either training
+    script, or if its model holds a NaN or an infinity (a diverged run: its episodes would be NaN
+    actions fed to the simulator, not results)."""
     try:
         data = Path(path).read_bytes()
-        ckpt = torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
-    except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
-        first_line = str(e).splitlines()[0] if str(e) else ""
-        raise ValueError(f"unreadable checkpoint: {type(e).__name__}: {first_line}") from None
-    if not isinstance(ckpt, dict) or TRAINING_MODULES.get(ckpt.get("action_space")) is None:
+    except OSError as e:
+        raise ValueError(f"unreadable checkpoint ({e.strerror or e})") from None
+    ckpt = runs.read_checkpoint_file(io.BytesIO(data))
+    if TRAINING_MODULES.get(ckpt.get("action_space")) is None:
         raise ValueError("not a PGG checkpoint (no known action_space field)")
+    if bad := runs.non_finite(ckpt["model"]):
+        raise ValueError(f"non-finite weights or statistics ({', '.join(bad[:3])}); not evaluated")
     return hashlib.sha1(data).hexdigest(), ckpt
 
 
@@ -151,19 +156,7 @@ def load_any_checkpoint(path: Path):
     return TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, path), ckpt
 
 
-def variant_label(train_guidance: float, cond_dropout: float) -> str:
-    if cond_dropout == 0:
-        return "ppo" if train_guidance == 1.0 else f"pgg_g{train_guidance:g}"
-    return f"pgg_drop{cond_dropout:g}" if train_guidance == 1.0 else f"pgg_g{train_guidance:g}_drop{cond_dropout:g}"
-
-
-# Training arguments that a sweep's rows carry in columns of their own (env_id, seed) or in the variant.
-OWN_COLUMNS = frozenset({"env_id", "seed", "guidance", "cond_dropout"})
-
-
-@functools.cache
-def training_defaults(kind: str) -> dict:
-    return dataclasses.asdict(TRAINING_MODULES[kind].Args())
+VARIANT_ARGS = frozenset({"guidance", "cond_dropout"})  # named by the variant, the label's first word
 
 
 def format_arg(value) -> str:
@@ -171,34 +164,27 @@ def format_arg(value) -> str:
 
 
 def config_label(ckpt: dict) -> str:
-    """The training configuration of a checkpoint, as a readable label: the variant, then
-    `key=value` for every training argument that differs from the training script's current
-    default (sorted by name), leaving out env_id, seed, the variant's own two and the arguments that
-    do not change what is trained (RUN_ONLY_ARGS); then `mujoco=<version>` where the checkpoint
-    records one and the task runs on MuJoCo. Arguments missing from an old checkpoint count as the
-    current defaults; arguments the current script no longer has are left out.
+    """The training configuration of a checkpoint, as a readable label: the variant, then `key=value`
+    for every training argument that differs from the frozen reference of its kind (REFERENCE_ARGS,
+    sorted by name); then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown`
+    where the checkpoint records no package versions (format 1), so that it is never pooled with runs
+    whose stack is known. Against frozen data, not the training scripts' current defaults: changing a
+    default neither renames nor splits an experiment. Arguments missing from an old checkpoint count
+    as the reference's; arguments the reference lacks (env_id, seed, how the run was recorded) are
+    left out, and so is the revision of the training code, which changes with every commit.
     E.g. `pgg_g1.1 learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`."""
-    module = TRAINING_MODULES[ckpt["action_space"]]
-    train_args, defaults = ckpt["args"], training_defaults(ckpt["action_space"])
-    excluded = RUN_ONLY_ARGS | OWN_COLUMNS
-    words = [variant_label(train_args["guidance"], train_args["cond_dropout"])]
-    for key in sorted(defaults.keys() - excluded):
-        value = train_args.get(key, defaults[key])
-        if value != defaults[key]:
+    reference, train_args = REFERENCE_ARGS[ckpt["action_space"]], ckpt["args"]
+    words = [variant_id(train_args["guidance"], train_args["cond_dropout"])]
+    for key in sorted(reference.keys() - VARIANT_ARGS):
+        value = train_args.get(key, reference[key])
+        if value != reference[key]:
             words.append(f"{key}={format_arg(value)}")
-    mujoco = (ckpt.get("versions") or {}).get("mujoco")
-    if mujoco and is_mujoco_env(ckpt["env_id"]):
-        words.append(f"mujoco={mujoco}")
+    versions = ckpt.get("versions")
+    if not versions:
+        words.append("versions=unknown")
+    elif versions.get("mujoco") and is_mujoco(ckpt["env_id"]):
+        words.append(f"mujoco={versions['mujoco']}")
     return " ".join(words)
-
-
-@functools.cache
-def is_mujoco_env(env_id: str) -> bool:
-    try:
-        entry_point = gym.spec(env_id).entry_point
-    except gym.error.Error:
-        return False
-    return isinstance(entry_point, str) and entry_point.startswith("gymnasium.envs.mujoco")
 
 
 def discover_checkpoints(paths, steps) -> list[Path]:
@@ -207,14 +193,14 @@ def discover_checkpoints(paths, steps) -> list[Path]:
         path = Path(raw)
         if not path.exists():
             raise InputError(f"no such file or directory: {raw}")
-        matches = [path] if path.is_file() else sorted(path.rglob("checkpoints/step_*.pt"))
+        matches = [path] if path.is_file() else sorted(path.rglob(f"checkpoints/{runs.CHECKPOINT_GLOB}"))
         if not matches:
-            raise InputError(f"no checkpoints (checkpoints/step_*.pt) under {raw}")
+            raise InputError(f"no checkpoints (checkpoints/{runs.CHECKPOINT_GLOB}) under {raw}")
         for match in matches:  # one entry per file, however many of the given paths reach it
             found.setdefault(match.resolve(), match)
     found = list(found.values())
     if steps is not None:
-        wanted = {f"step_{s:09d}.pt" for s in steps}
+        wanted = {runs.checkpoint_path(Path(), s).name for s in steps}
         found = [p for p in found if p.name in wanted]
         if not found:
             raise InputError(f"no checkpoint at steps {list(steps)} under {list(paths)}")
@@ -318,8 +304,7 @@ def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_
 
 
 def make_eval_env(ckpt: dict):
-    module = ppo_pgg_discrete if ckpt["action_space"] == "discrete" else ppo_pgg_continuous
-    return module.make_env(ckpt["env_id"])()
+    return TRAINING_MODULES[ckpt["action_space"]].make_env(ckpt["env_id"])()
 
 
 def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
@@ -339,11 +324,8 @@ def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_
 
     An episode that ends keeps its row (holding its last observation) until the whole cell is done,
     so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the first
-    step to the last. What a cell computes is then a function of the checkpoint, γ and the settings
-    alone: the same operations on the same shapes, whichever other cells are swept, in which order,
-    in which process, or whether the sweep was resumed. It does not rest on how a BLAS rounds
-    products of different row counts (MKL with AVX-512 rounds a 16-row product differently from an
-    8-row one)."""
+    step to the last: what a cell computes is a function of the checkpoint, γ and the settings alone
+    (the module docstring's Exactness)."""
     envs = [make_eval_env(ckpt) for _ in range(episodes)]
     horizon, action_size = horizon_and_action_size(envs[0], ckpt)
     # (horizon, episodes, action_size): the noise of time step t is one contiguous block.
@@ -382,7 +364,8 @@ def evaluate_sequential(policy: GuidedPolicy, ckpt, gamma, episodes, eval_seed, 
     Same seeds and noise as evaluate_cell; used by the tests and the benchmark. It agrees with the
     cells to rounding, not necessarily to the bit (see the module docstring)."""
     env = make_eval_env(ckpt)
-    returns, lengths = zip(*(play_episode(env, policy, ckpt, gamma, eval_seed, k, deterministic) for k in range(episodes)))
+    episodes_played = [play_episode(env, policy, ckpt, gamma, eval_seed, k, deterministic) for k in range(episodes)]
+    returns, lengths = zip(*episodes_played)
     env.close()
     return np.array(returns), np.array(lengths)
 
@@ -413,6 +396,7 @@ class Job:
     checkpoint: Path
     gamma: float
     settings: tuple  # (episodes, eval_seed, deterministic, uniform_null)
+    stack: tuple  # evaluation_stack() of the sweep
 
 
 @dataclass
@@ -428,16 +412,61 @@ def settings_of(args: Args) -> tuple:
     return (args.episodes, args.eval_seed, args.deterministic, args.uniform_null)
 
 
-def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple, digest: str | None = None) -> Path:
-    """One file per (checkpoint, γ, settings). The checkpoint's bytes (`digest`, their sha1; read
-    from the file if not given), not its path or timestamp, are its identity: a retrained run is
-    never mistaken for the one evaluated before, and a run directory copied to another machine or
-    folder keeps its finished cells."""
+def evaluation_stack() -> tuple[str, ...]:
+    """This process's versions of the STACK_COLUMNS packages, in that order ("none" where one is not installed)."""
+    versions = runs.package_versions()
+    return tuple(versions[package] or "none" for package in STACK_COLUMNS)
+
+
+def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple, digest: str | None = None,
+              stack: tuple | None = None) -> Path:  # fmt: skip
+    """One file per (checkpoint, γ, settings, evaluation stack). The checkpoint's bytes (`digest`,
+    their sha1; read from the file if not given), not its path or timestamp, are its identity: a
+    retrained run is never mistaken for the one evaluated before, and a run directory copied to
+    another machine or folder keeps its finished cells. The stack (this process's where not given)
+    is part of it too: a cell computed under another MuJoCo, gymnasium, numpy or torch is never reused."""
     if digest is None:
         digest = hashlib.sha1(Path(checkpoint).read_bytes()).hexdigest()
-    key = f"{digest}|{gamma!r}|{settings!r}|{EVALUATOR_REVISION}"
+    key = f"{digest}|{gamma!r}|{settings!r}|{stack or evaluation_stack()!r}|{EVALUATOR_REVISION}"
     name = hashlib.sha1(key.encode()).hexdigest()[:16]
     return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{name}.csv"
+
+
+def row_checksum(path: Path, row: dict) -> str:
+    """sha1 of a row's values and of its cell's file name, which encodes the cell's identity (cell_path):
+    a row that was edited, cut short or copied from another cell fails it."""
+    return hashlib.sha1(json.dumps([path.name, *(row[column] for column in EPISODE_COLUMNS)]).encode()).hexdigest()
+
+
+def write_cell(path: Path, rows: list[dict]) -> list[dict]:
+    """Writes a cell atomically, each value as the text read_cell will read and each row with its
+    checksum; returns the rows as written (str of a float is its repr, the digits csv writes)."""
+    written = []
+    for row in rows:
+        text = {column: str(row[column]) for column in EPISODE_COLUMNS}
+        written.append({**text, "checksum": row_checksum(path, text)})
+    write_csv_atomic(path, CELL_COLUMNS, written)
+    return written
+
+
+def read_cell(path: Path, episodes: int) -> list[dict]:
+    """The rows of a finished cell of `episodes` episodes. ValueError, saying why, for a file that
+    cannot be trusted: unreadable, another row count, a row cut short or whose checksum fails (an
+    edited value, a row of another cell), or episodes other than 0..episodes-1 each once."""
+    try:
+        rows = read_csv(path)
+    except (OSError, UnicodeDecodeError, csv.Error) as e:  # random bytes, a NUL, a directory in its place
+        raise ValueError(f"unreadable ({type(e).__name__})") from None
+    if len(rows) != episodes:
+        raise ValueError(f"{len(rows)} rows, not {episodes}")
+    for number, row in enumerate(rows, start=1):
+        if list(row) != CELL_COLUMNS or None in row.values():
+            raise ValueError(f"row {number} does not have the columns of a cell")
+        if row["checksum"] != row_checksum(path, row):
+            raise ValueError(f"row {number} does not match its checksum")
+    if {row["episode"] for row in rows} != {str(k) for k in range(episodes)}:
+        raise ValueError(f"its episodes are not 0..{episodes - 1} each once")
+    return rows
 
 
 def run_job(job: Job) -> JobResult:
@@ -449,7 +478,7 @@ def run_job(job: Job) -> JobResult:
         digest, ckpt = read_checkpoint(job.checkpoint)
         agent = TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, job.checkpoint)
         config = config_label(ckpt)
-    except Exception as e:
+    except Exception as e:  # noqa: BLE001  (reported in skipped.csv: a checkpoint rewritten or damaged since the plan)
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     if uniform_null and ckpt["action_space"] != "discrete":
         return JobResult(job, digest, [], 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only")
@@ -458,7 +487,7 @@ def run_job(job: Job) -> JobResult:
     train_args = ckpt["args"]
     common = {
         "env_id": ckpt["env_id"],
-        "variant": variant_label(train_args["guidance"], train_args["cond_dropout"]),
+        "variant": variant_id(train_args["guidance"], train_args["cond_dropout"]),
         "config": config,
         "run": job.checkpoint.parent.parent.name,
         "seed": train_args["seed"],
@@ -469,44 +498,14 @@ def run_job(job: Job) -> JobResult:
         "eval_guidance": job.gamma,
         "policy": "deterministic" if deterministic else "sample",
         "null_branch": "uniform" if uniform_null else "learned",
+        **dict(zip(STACK_COLUMNS, job.stack)),
+        "action_space": ckpt["action_space"],
     }
     rows = [
         {**common, "episode": k, "episode_seed": eval_seed + k, "return": float(returns[k]), "length": int(lengths[k])}
         for k in range(episodes)
     ]  # fmt: skip
     return JobResult(job, digest, rows, int(lengths.sum()), None)
-
-
-def write_csv_atomic(path: Path, columns: list[str], rows: list[dict]) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=columns, lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
-    os.replace(tmp, path)
-
-
-def read_csv(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
-
-
-def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tuple[float, float, float, float]:
-    """(mean, half-width, low, high) of the 95% confidence interval of the mean of `values` (here:
-    one mean return per training seed). "t": mean ± t_{0.975, n-1} · s / sqrt(n), s the sample standard
-    deviation (ddof=1). "bootstrap": percentile interval of `bootstrap_samples` resampled means (fixed
-    RNG seed), half-width = (high - low) / 2. With one value the interval is undefined (nan)."""
-    values = np.asarray(values, dtype=np.float64)
-    n, mean = len(values), float(np.mean(values))
-    if n < 2:
-        return mean, math.nan, math.nan, math.nan
-    if method == "t":
-        half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
-        return mean, half, mean - half, mean + half
-    resampled = np.random.default_rng(0).choice(values, size=(bootstrap_samples, n)).mean(1)
-    low, high = np.percentile(resampled, [2.5, 97.5])
-    return mean, float((high - low) / 2), float(low), float(high)
 
 
 GROUP_COLUMNS = SUMMARY_COLUMNS[:9]  # a summary row per (env, variant, config, ..., γ, policy, null branch)
@@ -561,11 +560,6 @@ def episode_sort_key(row: dict):
             row["policy"], row["null_branch"], int(row["episode"]))  # fmt: skip
 
 
-def format_duration(seconds: float) -> str:
-    seconds = int(seconds)
-    return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
-
-
 def check_args(args: Args) -> None:
     """Every argument, before anything is read or written; InputError with one line."""
     if not args.paths:
@@ -594,57 +588,35 @@ class SweepInterrupted(KeyboardInterrupt):
 
 
 def claim_output(output: Path):
-    """Creates the output directory, checks that it is writable, and takes an exclusive lock on it
-    (flock on <output>/.lock, released when the returned file is closed or its holder dies).
-    InputError with one line if it cannot be written or another sweep holds it."""
+    """Creates the output directory, checks that it and cells/ are writable (os.replace needs that),
+    and takes its lock (files.lock_directory: held until the returned file is closed or its holder
+    dies). InputError with one line if it cannot be written or another sweep holds it."""
     try:
         (output / "cells").mkdir(parents=True, exist_ok=True)
-        lock = open(output / ".lock", "a+")
-    except OSError as e:
-        raise InputError(f"cannot write to {output}: {e.strerror or e}") from None
-    try:
-        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        lock.seek(0)
-        holder = lock.read().strip()
-        lock.close()
-        raise InputError(f"{output} is in use by another sweep{f' (pid {holder})' if holder.isdigit() else ''}; "
-                         "wait for it to finish or choose another --output") from None  # fmt: skip
-    try:
-        for directory in (output, output / "cells"):  # os.replace needs the directories writable
+        for directory in (output, output / "cells"):
             probe = directory / f".probe.{os.getpid()}"
             probe.write_bytes(b"")
             probe.unlink()
-        lock.truncate(0)
-        lock.write(str(os.getpid()))
-        lock.flush()
+        return lock_directory(output, "another sweep")
+    except LockedError as e:
+        raise InputError(f"{e}; wait for it to finish or choose another --output") from None
     except OSError as e:
-        lock.close()
         raise InputError(f"cannot write to {output}: {e.strerror or e}") from None
-    return lock
-
-
-PR_SET_PDEATHSIG = 1
 
 
 def init_worker(parent_pid: int) -> None:
     """Pool initializer: a worker leaves Ctrl-C to the parent (which ends the workers), and dies with
-    the parent however the parent dies (Linux: the kernel sends SIGTERM when it exits)."""
+    the parent however the parent dies."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # not a handler inherited from the parent
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0)
-        except (OSError, AttributeError):
-            pass
-    if os.getppid() != parent_pid:  # the parent died before prctl
-        os._exit(1)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # pool.terminate's signal, not a handler inherited from the parent
+    die_with_parent(parent_pid)
 
 
-def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) -> tuple[dict, dict]:
+def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skipped: list[str]) -> tuple[dict, dict]:
     """({(checkpoint, γ): cell path} of every cell the sweep asks for, {checkpoint: config label}).
-    Reads each checkpoint once; unreadable ones go to `skipped`. InputError if two checkpoints are the
-    same experiment, seed and step (two runs that would count as one seed)."""
+    Reads each checkpoint once; unreadable ones and those with non-finite models go to `skipped`.
+    InputError if two checkpoints are the same experiment, seed and step (two runs that would count
+    as one seed)."""
     settings, cells, experiments, labels = settings_of(args), {}, {}, {}
     for checkpoint in checkpoints:
         try:
@@ -653,10 +625,10 @@ def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) 
             identity = (ckpt["env_id"], config_label(ckpt), train_args["guidance"], train_args["cond_dropout"],
                         train_args["seed"], ckpt["step_mark"])  # fmt: skip
             kind = ckpt["action_space"]
-        except ValueError as e:  # read_checkpoint's: unreadable, or not a checkpoint of these scripts
+        except ValueError as e:  # read_checkpoint's: unreadable, not a checkpoint of these scripts, non-finite
             skipped.append(f"{checkpoint}: {e}")
             continue
-        except Exception as e:  # a checkpoint dict without a field the sweep needs
+        except Exception as e:  # noqa: BLE001  (reported: a checkpoint dict without a field the sweep needs)
             skipped.append(f"{checkpoint}: not a PGG checkpoint ({type(e).__name__}: {e})")
             continue
         other = experiments.setdefault(identity, checkpoint)
@@ -667,7 +639,7 @@ def plan(args: Args, checkpoints: list[Path], output: Path, skipped: list[str]) 
             )
         labels[checkpoint] = identity[1]
         for gamma in dict.fromkeys(args.gammas if args.gammas is not None else PAPER_GAMMAS[kind]):
-            cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest)
+            cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest, stack)
     return cells, labels
 
 
@@ -686,71 +658,80 @@ def sweep(args: Args) -> Path:
 
 
 def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
-    skipped = []
-    cells, labels = plan(args, checkpoints, output, skipped)
+    skipped, stack = [], evaluation_stack()
+    cells, labels = plan(args, checkpoints, output, stack, skipped)
+    finished = {}  # (checkpoint, γ) -> its rows, as read back from its cell file or written to it
     try:
-        done = sum(path.exists() for path in cells.values())
-        print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {done} already done", file=sys.stderr)
-        changed = evaluate_missing(args, output, cells, skipped)
+        for cell, path in cells.items():
+            if path.exists():
+                try:
+                    finished[cell] = read_cell(path, args.episodes)
+                except ValueError as e:
+                    print(f"re-evaluating {path}: {e}", file=sys.stderr)
+        print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {len(finished)} already done", file=sys.stderr)
+        changed = evaluate_missing(args, output, stack, cells, finished, skipped)
         for checkpoint in sorted(changed):
             skipped.append(f"{checkpoint}: rewritten during the sweep; rerun the sweep to evaluate its new contents")
         rows = []
-        for (checkpoint, _), path in cells.items():
-            if path.exists() and checkpoint not in changed:
-                # The label of today's defaults: a cell written before a default changed keeps its numbers
-                # but must not split its run from the cells written after.
-                rows.extend({**row, "config": labels[checkpoint]} for row in read_csv(path))
+        for (checkpoint, _), cell_rows in finished.items():
+            if checkpoint not in changed:
+                # The label of today's rule: a cell written before the rule changed keeps its numbers but
+                # must not split its run from the cells written after.
+                rows.extend({**{c: row[c] for c in EPISODE_COLUMNS}, "config": labels[checkpoint]} for row in cell_rows)
         rows.sort(key=episode_sort_key)
         summary = summarise(rows, args.ci, args.bootstrap_samples)
         write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
         write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
         write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
     except KeyboardInterrupt:
-        kept = sum(path.exists() for path in cells.values())
         raise SweepInterrupted(
-            f"{kept} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "
+            f"{len(finished)} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "
             "rerun the same command to evaluate the rest"
         ) from None
     for reason in skipped:
         print(f"skipped {reason}", file=sys.stderr)
-    print(f"wrote {output / 'episodes.csv'} ({len(rows)} episodes), {output / 'summary.csv'} ({len(summary)} rows)"
-          + (f"; skipped {len(skipped)} checkpoint(s), listed in {output / 'skipped.csv'}" if skipped else ""))  # fmt: skip
+    listed = f"; skipped {len(skipped)} checkpoint(s), listed in {output / 'skipped.csv'}" if skipped else ""
+    wrote = f"{output / 'episodes.csv'} ({len(rows)} episodes), {output / 'summary.csv'} ({len(summary)} rows)"
+    print(f"wrote {wrote}{listed}")
     if not rows:
         raise InputError("no checkpoint could be evaluated")
     return output
 
 
-def evaluate_missing(args: Args, output: Path, cells: dict, skipped: list[str]) -> set[Path]:
-    """Evaluates the cells not yet on disk, writing each as it finishes; returns the checkpoints
-    whose bytes changed since `cells` was planned."""
+def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finished: dict,
+                     skipped: list[str]) -> set[Path]:  # fmt: skip
+    """Evaluates the cells not in `finished`, writing each as it finishes and adding its rows to
+    `finished`; returns the checkpoints whose bytes changed since `cells` was planned."""
     settings = settings_of(args)
-    jobs = [Job(checkpoint, gamma, settings) for (checkpoint, gamma), path in cells.items() if not path.exists()]
-    total_cells = len(jobs)
-    done_cells, env_steps, start, changed = 0, 0, time.time(), set()
-    pool = None
+    missing = [cell for cell in cells if cell not in finished]
+    jobs = [Job(checkpoint, gamma, settings, stack) for checkpoint, gamma in missing]
+    if not jobs:
+        return set()
+    progress = Progress(label="sweep", total=len(jobs), unit="cells", interval=0, stream=sys.stderr)
+    handled, env_steps, start, changed, pool = 0, 0, time.time(), set(), None
     try:
         if args.workers > 1 and len(jobs) > 1:
             context = multiprocessing.get_context("fork")
             pool = context.Pool(min(args.workers, len(jobs)), initializer=init_worker, initargs=(os.getpid(),))
         for result in pool.imap_unordered(run_job, jobs) if pool else map(run_job, jobs):
-            job = result.job
+            job, handled = result.job, handled + 1
             if result.error:
                 skipped.append(result.error)
-                total_cells -= 1
-                continue
-            # Named by the bytes that were evaluated. A checkpoint rewritten since the plan keeps its new
-            # cell for a later sweep; this sweep reports none of its cells (they could mix two files).
-            path = cell_path(output, job.checkpoint, job.gamma, settings, result.digest)
-            write_csv_atomic(path, EPISODE_COLUMNS, result.rows)
-            if path != cells[(job.checkpoint, job.gamma)]:
-                changed.add(job.checkpoint)
-            done_cells += 1
-            env_steps += result.env_steps
+            else:
+                # Named by the bytes that were evaluated. A checkpoint rewritten since the plan keeps its new
+                # cell for a later sweep; this sweep reports none of its cells (they could mix two files).
+                path = cell_path(output, job.checkpoint, job.gamma, settings, result.digest, stack)
+                rows = write_cell(path, result.rows)
+                if path == cells[(job.checkpoint, job.gamma)]:
+                    finished[(job.checkpoint, job.gamma)] = rows
+                else:
+                    changed.add(job.checkpoint)
+                env_steps += result.env_steps
             elapsed = time.time() - start
-            eta = elapsed / done_cells * (total_cells - done_cells)
-            print(f"[{done_cells}/{total_cells} cells] {env_steps / max(elapsed, 1e-9):,.0f} env steps/s, "
-                  f"elapsed {format_duration(elapsed)}, ETA {format_duration(eta)}", file=sys.stderr, flush=True)  # fmt: skip
+            rate = env_steps / max(elapsed, 1e-9)
+            progress.update(handled, f"{rate:,.0f} env steps/s  elapsed {format_duration(elapsed)}")
     finally:
+        progress.close()
         if pool:
             pool.terminate()
             pool.join()
@@ -767,7 +748,9 @@ def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, eval_seed: in
     if ckpt["action_space"] == "continuous":
         env = gym.wrappers.FlattenObservation(env)  # as the training script's make_env
     frames = []
-    total, _ = play_episode(env, policy, ckpt, gamma, eval_seed, episode, deterministic, lambda: frames.append(env.render()))
+    total, _ = play_episode(
+        env, policy, ckpt, gamma, eval_seed, episode, deterministic, lambda: frames.append(env.render())
+    )
     env.close()
     return frames, total
 
@@ -812,14 +795,15 @@ def record_videos(args: Args) -> list[Path]:
     last frame). Returns the files written."""
     checkpoints = discover_checkpoints(args.paths, args.steps)
     if len(checkpoints) != 1:
-        raise InputError(f"--video records one checkpoint; {len(checkpoints)} found (name a checkpoint file, or narrow with --steps)")
+        raise InputError(f"--video records one checkpoint; {len(checkpoints)} found "
+                         "(name a checkpoint file, or narrow with --steps)")  # fmt: skip
     try:
         agent, ckpt = load_any_checkpoint(checkpoints[0])
     except ValueError as e:
         raise InputError(f"{checkpoints[0]}: {e}") from None
     try:
         probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
-    except Exception as e:  # a missing dependency (Pusher-v4 on mujoco 3), a bad MUJOCO_GL, ...
+    except Exception as e:  # noqa: BLE001  (reported: a missing dependency, Pusher-v4 on mujoco 3, a bad MUJOCO_GL)
         raise InputError(f"cannot make environment {ckpt['env_id']!r}: {e}") from None
     error = runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30
@@ -861,8 +845,9 @@ def main() -> None:
         print(f"interrupted: {e}" if isinstance(e, SweepInterrupted) else "interrupted before any cell was evaluated",
               file=sys.stderr)  # fmt: skip
         sys.exit(130)
-    except OSError as e:  # e.g. the disk filled up during the sweep
-        print(f"error: {e}", file=sys.stderr)
+    except OSError as e:  # e.g. the disk filled up during the sweep; files.write_atomic's names the file
+        message = e.strerror or str(e)
+        print(f"error: {message}: {e.filename}" if e.filename else f"error: {message}", file=sys.stderr)
         sys.exit(1)
 
 

@@ -15,11 +15,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from conftest import ROOT, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from conftest import ROOT
 
 SCRIPT = [sys.executable, str(ROOT / "eval_gamma_sweep.py")]
 
@@ -33,22 +33,22 @@ def runs(tmp_path_factory):
         args = ppo_pgg_discrete.Args(
             total_timesteps=4096, checkpoint_interval=2048, seed=seed, guidance=1.1, output_dir=str(root / "discrete"),
         )  # fmt: skip
-        ppo_pgg_discrete.train(args, ppo_pgg_discrete.prepare_run_dir(args))
+        train(ppo_pgg_discrete, args)
     args = ppo_pgg_discrete.Args(  # seed 1 again, another learning rate: another experiment
         total_timesteps=4096, checkpoint_interval=2048, seed=1, guidance=1.1, learning_rate=0.002,
         output_dir=str(root / "discrete_lr"),
     )  # fmt: skip
-    ppo_pgg_discrete.train(args, ppo_pgg_discrete.prepare_run_dir(args))
+    train(ppo_pgg_discrete, args)
     args = ppo_pgg_continuous.Args(
         env_id="Hopper-v4", total_timesteps=2048, num_steps=1024, num_minibatches=8, update_epochs=2,
         checkpoint_interval=1024, guidance=1.1, output_dir=str(root / "continuous"),
     )  # fmt: skip
-    ppo_pgg_continuous.train(args, ppo_pgg_continuous.prepare_run_dir(args))
+    train(ppo_pgg_continuous, args)
     return root
 
 
 def checkpoint(root: Path, kind: str) -> Path:
-    return sorted((root / kind).rglob("step_*.pt"))[-1]
+    return max((root / kind).rglob("step_*.pt"))
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
@@ -135,7 +135,8 @@ def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monk
     sweep.sweep(resumed)
     assert cell_texts(tmp_path / "resumed", 2.0) == expected
     episodes = (tmp_path / "resumed" / "episodes.csv").read_text()
-    assert all(line in episodes for text in expected.values() for line in text.splitlines()[1:])
+    cell_lines = [line.rsplit(",", 1)[0] for text in expected.values() for line in text.splitlines()[1:]]
+    assert all(line in episodes for line in cell_lines)  # each cell row, its checksum left out
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
@@ -145,16 +146,18 @@ def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
     raw = np.random.default_rng(0).normal(size=(16, ckpt["obs_dim"])) * 0.5
     guidance = ckpt["args"]["guidance"]
     evaluated = policy.guided(raw, np.full(16, guidance))
-    with torch.no_grad():  # the policy that acted in training rollouts, and the one PPO optimised
+    # The mixture that acted in training rollouts (numpy, on the actor's output), and the policy PPO
+    # optimised (torch.lerp, equal to the last bit or so).
+    with torch.no_grad():
         if kind == "discrete":
             obs = torch.as_tensor(raw, dtype=torch.float32)
-            acted = ppo_pgg_discrete.guide(agent.actor(obs), agent.unconditional_logits(), guidance)
+            acted = ppo_pgg_discrete.guide(agent.actor(obs).numpy(), agent.unconditional_logits().numpy(), guidance)
             optimised = agent.guided_logits(obs, guidance)
         else:
             obs = agent.obs_norm(raw)
-            acted = ppo_pgg_continuous.guide(agent.actor_mean(obs), agent.unconditional_mean(), guidance)
+            acted = ppo_pgg_continuous.guide(agent.actor_mean(obs).numpy(), agent.unconditional_mean().numpy(), guidance)
             optimised = agent.guided_mean(obs, guidance)
-    assert torch.equal(evaluated, acted)
+    np.testing.assert_array_equal(evaluated.numpy(), acted)
     torch.testing.assert_close(evaluated, optimised, rtol=1e-6, atol=1e-6)
 
 
@@ -315,12 +318,12 @@ def test_bad_input_exits_with_one_line(runs, tmp_path, argv, message, monkeypatc
 def test_bad_input_in_a_fresh_process_is_one_line_without_traceback(runs, tmp_path):
     proc = subprocess.run(
         [*SCRIPT, str(runs / "discrete"), "--gammas", "-1", "--output", str(tmp_path / "o")],
-        capture_output=True, text=True, timeout=120,
+        check=False, capture_output=True, text=True, timeout=120,
     )  # fmt: skip
     assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [proc.stderr.strip()], proc.stderr
     assert proc.stderr.startswith("error: --gammas must be")
     proc = subprocess.run(
-        [*SCRIPT, str(runs / "discrete"), "--policy", "greedy"], capture_output=True, text=True, timeout=120
+        [*SCRIPT, str(runs / "discrete"), "--policy", "greedy"], check=False, capture_output=True, text=True, timeout=120
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and "--policy" in proc.stderr  # no such option
 
@@ -368,7 +371,7 @@ def test_a_plain_tensor_file_is_skipped_without_a_warning(runs, tmp_path):
 def test_config_label_names_every_training_argument_that_differs(runs):
     _, ckpt = sweep.read_checkpoint(checkpoint(runs, "discrete"))
     assert sweep.config_label(ckpt) == "pgg_g1.1 total_timesteps=4096"  # not seed, checkpoint_interval, output_dir
-    _, other_lr = sweep.read_checkpoint(sorted((runs / "discrete_lr").rglob("step_*.pt"))[-1])
+    _, other_lr = sweep.read_checkpoint(max((runs / "discrete_lr").rglob("step_*.pt")))
     assert sweep.config_label(other_lr) == "pgg_g1.1 learning_rate=0.002 total_timesteps=4096"
     # An older checkpoint lacks arguments added since: they count as their defaults.
     old_args = {
@@ -392,7 +395,8 @@ def test_config_label_names_every_training_argument_that_differs(runs):
     _, hopper = sweep.read_checkpoint(checkpoint(runs, "continuous"))
     hopper_label = "pgg_g1.1 num_minibatches=8 num_steps=1024 total_timesteps=2048 update_epochs=2"
     assert sweep.config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
-    assert sweep.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label
+    # A format-1 checkpoint records no versions: never pooled with runs whose stack is known.
+    assert sweep.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
 
 
 def test_runs_of_one_seed_number_in_different_configurations_stay_apart(runs, tmp_path):
@@ -450,9 +454,9 @@ def test_summary_keeps_configurations_apart_and_reads_rows_without_config():
 def test_a_cell_is_named_by_the_bytes_it_evaluated(runs, tmp_path, monkeypatch):
     seed_1 = next(p for p in (runs / "discrete").iterdir() if p.name.endswith("__s1"))
     shutil.copytree(seed_1, tmp_path / "runs" / seed_1.name)
-    target = sorted((tmp_path / "runs").rglob("step_*.pt"))[-1]
+    target = max((tmp_path / "runs").rglob("step_*.pt"))
     evaluated_bytes = target.read_bytes()
-    replacement = sorted((runs / "discrete_lr").rglob("step_*.pt"))[-1].read_bytes()  # another run's weights
+    replacement = max((runs / "discrete_lr").rglob("step_*.pt")).read_bytes()  # another run's weights
     real_run_job = sweep.run_job
 
     def rerun_rewrites_the_file_meanwhile(job):
@@ -479,8 +483,8 @@ def test_a_cell_is_named_by_the_bytes_it_evaluated(runs, tmp_path, monkeypatch):
 def test_a_checkpoint_rewritten_during_its_sweep_is_reported_not_mixed(runs, tmp_path, monkeypatch):
     seed_1 = next(p for p in (runs / "discrete").iterdir() if p.name.endswith("__s1"))
     shutil.copytree(seed_1, tmp_path / "runs" / seed_1.name)
-    target = sorted((tmp_path / "runs").rglob("step_*.pt"))[-1]
-    replacement = sorted((runs / "discrete_lr").rglob("step_*.pt"))[-1].read_bytes()
+    target = max((tmp_path / "runs").rglob("step_*.pt"))
+    replacement = max((runs / "discrete_lr").rglob("step_*.pt")).read_bytes()
     real_run_job = sweep.run_job
 
     def rewrite_after_the_first_cell(job):
@@ -489,7 +493,7 @@ def test_a_checkpoint_rewritten_during_its_sweep_is_reported_not_mixed(runs, tmp
         return result
 
     monkeypatch.setattr(sweep, "run_job", rewrite_after_the_first_cell)
-    seed_2 = sorted((runs / "discrete").rglob("step_*.pt"))[-1]
+    seed_2 = max((runs / "discrete").rglob("step_*.pt"))
     out = sweep.sweep(sweep_args(runs, tmp_path / "out", paths=(str(target), str(seed_2))))
     assert len(list((out / "cells").iterdir())) == 4  # every cell kept, each named by what it evaluated
     (skipped,) = list(csv.DictReader((out / "skipped.csv").read_text().splitlines()))
@@ -612,7 +616,7 @@ def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
 
 
 def test_video_of_several_checkpoints_is_one_line_of_error(runs, tmp_path):
-    proc = subprocess.run([*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")], capture_output=True, text=True, timeout=120)
+    proc = subprocess.run([*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")], check=False, capture_output=True, text=True, timeout=120)
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and "--video records one checkpoint; 4 found" in lines[0]
     assert not (tmp_path / "v").exists()
@@ -622,23 +626,25 @@ def test_video_of_a_mujoco_checkpoint_where_a_gl_backend_renders(runs, tmp_path)
     pytest.importorskip("moviepy", reason="--video needs the [video] extra")
     env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
     probe = subprocess.run([sys.executable, "-c", "import gymnasium as g; e = g.make('Hopper-v4', render_mode='rgb_array'); e.reset(); e.render()"],
-                           capture_output=True, env=env, timeout=120)  # fmt: skip
+                           check=False, capture_output=True, env=env, timeout=120)  # fmt: skip
     if probe.returncode:
         pytest.skip("MuJoCo cannot render headless here (apt-get install libosmesa6 for MUJOCO_GL=osmesa)")
     proc = subprocess.run([*SCRIPT, str(checkpoint(runs, "continuous")), "--gammas", "1", "1.5", "--video", str(tmp_path / "v")],
-                          capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
+                          check=False, capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert frame_count(tmp_path / "v" / "side_by_side.mp4") >= max(frame_count(tmp_path / "v" / f"gamma_{g}.mp4") for g in ("1", "1.5"))
 
 
-def test_cached_cells_take_todays_config_label(runs, tmp_path):
+def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
     """A cell keeps its numbers across reruns, but its rows carry the label the checkpoint has today:
-    a cell written under older defaults must not split its run into two configurations."""
+    a cell written under an older labelling rule must not split its run into two configurations."""
     args = sweep_args(runs, tmp_path / "out")
     sweep.sweep(args)
     fresh = sweep.read_csv(tmp_path / "out" / "episodes.csv")
     for cell in (tmp_path / "out" / "cells").glob("*.csv"):
-        rows = sweep.read_csv(cell)
-        sweep.write_csv_atomic(cell, sweep.EPISODE_COLUMNS, [{**row, "config": "pgg_g1.1 stale=1"} for row in rows])
+        rows = sweep.read_cell(cell, args.episodes)
+        sweep.write_cell(cell, [{**row, "config": "pgg_g1.1 stale=1"} for row in rows])  # whole, checksums and all
+    evaluated = []
+    monkeypatch.setattr(sweep, "run_job", evaluated.append)
     sweep.sweep(args)
-    assert sweep.read_csv(tmp_path / "out" / "episodes.csv") == fresh
+    assert evaluated == [] and sweep.read_csv(tmp_path / "out" / "episodes.csv") == fresh
