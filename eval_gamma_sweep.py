@@ -478,7 +478,7 @@ def run_job(job: Job) -> JobResult:
         digest, ckpt = read_checkpoint(job.checkpoint)
         agent = TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, job.checkpoint)
         config = config_label(ckpt)
-    except Exception as e:  # noqa: BLE001  (reported in skipped.csv: a checkpoint rewritten or damaged since the plan)
+    except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     if uniform_null and ckpt["action_space"] != "discrete":
         return JobResult(job, digest, [], 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only")
@@ -628,7 +628,7 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
         except ValueError as e:  # read_checkpoint's: unreadable, not a checkpoint of these scripts, non-finite
             skipped.append(f"{checkpoint}: {e}")
             continue
-        except Exception as e:  # noqa: BLE001  (reported: a checkpoint dict without a field the sweep needs)
+        except Exception as e:
             skipped.append(f"{checkpoint}: not a PGG checkpoint ({type(e).__name__}: {e})")
             continue
         other = experiments.setdefault(identity, checkpoint)
@@ -803,7 +803,7 @@ def record_videos(args: Args) -> list[Path]:
         raise InputError(f"{checkpoints[0]}: {e}") from None
     try:
         probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
-    except Exception as e:  # noqa: BLE001  (reported: a missing dependency, Pusher-v4 on mujoco 3, a bad MUJOCO_GL)
+    except Exception as e:
         raise InputError(f"cannot make environment {ckpt['env_id']!r}: {e}") from None
     error = runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30

@@ -27,8 +27,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
-import torch.nn as nn
 import tyro
+from torch import nn
 
 from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
@@ -224,7 +224,9 @@ class Agent(nn.Module):
         """Mean of pi(.|null), shape (action_dim,); one actor pass whatever the batch size."""
         return self.actor_mean(self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_mean(self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None) -> torch.Tensor:  # PGG
+    def guided_mean(
+        self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:  # PGG
         """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations.
         `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
         # pi_hat = pi exactly at γ = 1: PPO's own actor pass, as an extra null row could change how
@@ -314,7 +316,7 @@ class Rollout:
 
     @classmethod
     def empty(cls, num_steps: int, num_envs: int, obs_dim: int, action_dim: int) -> "Rollout":
-        zeros = lambda *shape: torch.zeros(shape)  # noqa: E731
+        zeros = lambda *shape: torch.zeros(shape)
         return cls(
             obs=zeros(num_steps, num_envs, obs_dim),
             actions=zeros(num_steps, num_envs, action_dim),
@@ -351,7 +353,11 @@ def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollo
             policy.update_statistics(np.stack(infos["final_obs"][infos["_final_obs"]]))
             ended = infos["final_info"]
             for i in np.flatnonzero(ended["_episode"]):
-                on_episode(float(ended["episode"]["r"][i]), int(ended["episode"]["l"][i]), global_step + (step + 1) * len(raw_obs))
+                on_episode(
+                    float(ended["episode"]["r"][i]),
+                    int(ended["episode"]["l"][i]),
+                    global_step + (step + 1) * len(raw_obs),
+                )
         # Normalised on arrival, with statistics that include it, as CleanRL's wrapper returns it.
         next_obs = policy.observe(raw_obs)
     return next_obs, next_done
@@ -393,7 +399,7 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
         # start at 1: the KL estimates and the clip fraction describe the kept rows, the policy's own
         # change. Masked means, not boolean indexing: the compiled loss keeps static shapes.
         kept = torch.ones_like(ratio) if drop_mask is None else (~drop_mask).float()  # PGG
-        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # noqa: E731  # PGG
+        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # PGG
         # http://joschu.net/blog/kl-approx.html
         old_approx_kl = kept_mean(-logratio)  # PGG
         approx_kl = kept_mean((ratio - 1) - logratio)  # PGG
@@ -402,7 +408,7 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
         dropped_stats = {}  # PGG
         if drop_mask is not None:  # PGG
             dropped = 1.0 - kept  # PGG
-            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # noqa: E731  # PGG
+            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # PGG
             dropped_stats = {  # PGG
                 "pgg/dropped_fraction": dropped.mean(),  # PGG
                 "pgg/dropped_ratio_mean": dropped_mean(ratio),  # PGG
@@ -441,7 +447,9 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     }
 
 
-def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss) -> dict[str, float]:
+def ppo_update(
+    agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss
+) -> dict[str, float]:
     """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
     batch = {
         "obs": buf.obs.reshape(-1, buf.obs.shape[-1]),
@@ -489,7 +497,9 @@ def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> di
     mean_cond = agent.actor_mean(obs)  # PGG
     inv_std = torch.exp(-agent.actor_logstd)  # PGG
     return {  # PGG
-        "pgg/kl_guided_vs_conditional": (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1)).mean().item(),  # PGG
+        "pgg/kl_guided_vs_conditional": (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1))
+        .mean()
+        .item(),  # PGG
         "pgg/unconditional_mean_norm": agent.unconditional_mean().norm().item(),  # PGG
         "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
         "charts/action_std_mean": agent.actor_logstd.exp().mean().item(),  # PGG
@@ -507,7 +517,9 @@ def train(args: Args, run: runs.Run) -> None:
     writer = run.open_writer(resumed)
     runs.seed_everything(args)
 
-    envs = make_vector_env(args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed))
+    envs = make_vector_env(
+        args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
+    )
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = Agent(obs_dim, action_dim, args.obs_clip)
     # At γ = 1 without dropout the null embedding is outside the objective: its all-zero gradient in
@@ -534,8 +546,15 @@ def train(args: Args, run: runs.Run) -> None:
         first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
             raw_obs, _ = envs.reset(seed=args.seed + first_iteration - 1)
-            next_obs, next_done = RolloutPolicy(agent, args.guidance).observe(raw_obs), np.zeros(args.num_envs, dtype=np.float32)  # PGG
-    marks = run.start_progress(num_iterations * batch_size, global_step, runs.checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size))
+            next_obs, next_done = (
+                RolloutPolicy(agent, args.guidance).observe(raw_obs),
+                np.zeros(args.num_envs, dtype=np.float32),
+            )  # PGG
+    marks = run.start_progress(
+        num_iterations * batch_size,
+        global_step,
+        runs.checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size),
+    )
 
     try:
         for iteration in range(first_iteration, num_iterations + 1):

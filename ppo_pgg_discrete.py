@@ -26,8 +26,8 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
-import torch.nn as nn
 import tyro
+from torch import nn
 
 from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
@@ -142,7 +142,9 @@ class Agent(nn.Module):
         """Logits of pi(.|null), shape (n_actions,); one actor pass whatever the batch size."""
         return self.actor(self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_logits(self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None) -> torch.Tensor:  # PGG
+    def guided_logits(
+        self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None
+    ) -> torch.Tensor:  # PGG
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
         replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
         # pi_hat = pi exactly at γ = 1: PPO's own actor pass, as an extra null row could change how
@@ -218,7 +220,7 @@ class Rollout:
 
     @classmethod
     def empty(cls, num_steps: int, num_envs: int, obs_dim: int) -> "Rollout":
-        zeros = lambda *shape: torch.zeros(shape)  # noqa: E731
+        zeros = lambda *shape: torch.zeros(shape)
         return cls(
             obs=zeros(num_steps, num_envs, obs_dim),
             actions=torch.zeros((num_steps, num_envs), dtype=torch.long),
@@ -252,7 +254,11 @@ def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollo
         if "final_info" in infos:  # a sub-env ended an episode; its last step's info is kept here
             ended = infos["final_info"]
             for i in np.flatnonzero(ended["_episode"]):
-                on_episode(float(ended["episode"]["r"][i]), int(ended["episode"]["l"][i]), global_step + (step + 1) * len(next_obs))
+                on_episode(
+                    float(ended["episode"]["r"][i]),
+                    int(ended["episode"]["l"][i]),
+                    global_step + (step + 1) * len(next_obs),
+                )
     return next_obs, next_done
 
 
@@ -292,7 +298,7 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
         # start at 1: the KL estimates and the clip fraction describe the kept rows, the policy's own
         # change. Masked means, not boolean indexing: the compiled loss keeps static shapes.
         kept = torch.ones_like(ratio) if drop_mask is None else (~drop_mask).float()  # PGG
-        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # noqa: E731  # PGG
+        kept_mean = lambda x: (kept * x).sum() / kept.sum().clamp_min(1.0)  # PGG
         # http://joschu.net/blog/kl-approx.html
         old_approx_kl = kept_mean(-logratio)  # PGG
         approx_kl = kept_mean((ratio - 1) - logratio)  # PGG
@@ -301,7 +307,7 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
         dropped_stats = {}  # PGG
         if drop_mask is not None:  # PGG
             dropped = 1.0 - kept  # PGG
-            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # noqa: E731  # PGG
+            dropped_mean = lambda x: (dropped * x).sum() / dropped.sum().clamp_min(1.0)  # PGG
             dropped_stats = {  # PGG
                 "pgg/dropped_fraction": dropped.mean(),  # PGG
                 "pgg/dropped_ratio_mean": dropped_mean(ratio),  # PGG
@@ -340,7 +346,9 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     }
 
 
-def ppo_update(agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss) -> dict[str, float]:
+def ppo_update(
+    agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss
+) -> dict[str, float]:
     """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
     batch = {
         "obs": buf.obs.reshape(-1, buf.obs.shape[-1]),
@@ -432,7 +440,11 @@ def train(args: Args, run: runs.Run) -> None:
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
             obs, _ = envs.reset(seed=args.seed + first_iteration - 1)
             next_obs, next_done = obs.astype(np.float32), np.zeros(args.num_envs, dtype=np.float32)
-    marks = run.start_progress(num_iterations * batch_size, global_step, runs.checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size))
+    marks = run.start_progress(
+        num_iterations * batch_size,
+        global_step,
+        runs.checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size),
+    )
 
     try:
         for iteration in range(first_iteration, num_iterations + 1):

@@ -206,7 +206,7 @@ def train_one(spec: RunSpec) -> None:
             stdout=log,
             stderr=subprocess.STDOUT,
             env=env,
-            preexec_fn=processes.child_of(os.getpid()),  # noqa: PLW1509  only prctl and getppid run in it
+            preexec_fn=processes.child_of(os.getpid()),
         )
         RUNNING.add(child)
         try:
@@ -323,7 +323,7 @@ def run_submitit(todo: list[RunSpec], tally: Tally, args: Args) -> None:
             try:
                 job.result()
                 tally.record(spec)
-            except Exception as e:  # noqa: BLE001  submitit wraps the job's exception, whatever it was, in its own
+            except Exception as e:
                 # The run's log, unless the job failed before train_one opened it: then submitit's own.
                 tally.record(spec, str(e).strip().splitlines()[-1], spec.log if spec.log.exists() else job.paths.stderr)
         if finished:
@@ -384,7 +384,7 @@ def main() -> None:
         for job in SUBMITTED:
             try:
                 job.cancel(check=False)
-            except Exception:  # noqa: BLE001, S110  a job that already ended, or a scheduler that is gone
+            except Exception:  # noqa: S110  a job that already ended, or a scheduler that is gone
                 pass
         os._exit(128 + signum)
 

@@ -46,10 +46,10 @@ import torch
 import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import eval_gamma_sweep as sweep  # noqa: E402
-import ppo_pgg_continuous  # noqa: E402
-import ppo_pgg_discrete  # noqa: E402
-from pgg_utils.runs import train_in_process  # noqa: E402
+import eval_gamma_sweep as sweep
+import ppo_pgg_continuous
+import ppo_pgg_discrete
+from pgg_utils.runs import train_in_process
 
 CLEANRL_SPS = {"CartPole-v1": (3400, 4000), "Hopper-v4": (780, 780)}
 CLEANRL_SCRIPTS = {"CartPole-v1": "ppo.py", "Hopper-v4": "ppo_continuous_action.py"}
@@ -243,7 +243,7 @@ def sweep_checkpoint(given: dict[str, Path], env_id: str, module, args, tmp: str
         return given[env_id]
     args.output_dir = tmp
     train_in_process(module, args)
-    return sorted(Path(tmp).rglob("step_*.pt"))[-1]
+    return max(Path(tmp).rglob("step_*.pt"))
 
 
 def checkpoints_by_env(paths) -> dict[str, Path]:
@@ -281,8 +281,12 @@ def main() -> None:
     torch.use_deterministic_algorithms(True)  # its first call imports a lot; keep that out of the timings
     rows = []
 
-    cartpole = lambda g, compiled=False: ppo_pgg_discrete.Args(env_id="CartPole-v1", total_timesteps=args.cartpole_steps, guidance=g, compile=compiled)  # noqa: E731
-    hopper = lambda g, compiled=False: ppo_pgg_continuous.Args(env_id="Hopper-v4", total_timesteps=args.hopper_steps, guidance=g, compile=compiled)  # noqa: E731
+    cartpole = lambda g, compiled=False: ppo_pgg_discrete.Args(
+        env_id="CartPole-v1", total_timesteps=args.cartpole_steps, guidance=g, compile=compiled
+    )
+    hopper = lambda g, compiled=False: ppo_pgg_continuous.Args(
+        env_id="Hopper-v4", total_timesteps=args.hopper_steps, guidance=g, compile=compiled
+    )
     configs = [("CartPole-v1", ppo_pgg_discrete, cartpole), ("Hopper-v4", ppo_pgg_continuous, hopper)]
     variants = [(1.0, False), (1.1, False), (1.0, True), (1.1, True)]  # (guidance, --compile)
     sps = {(env, *v): [] for env, _, _ in configs for v in variants}
@@ -300,7 +304,9 @@ def main() -> None:
             runs = [make_args(*v) for v in order]
             for v, run, timed in zip(order, runs, interleaved_training(module, runs)):
                 sps[(env_id, *v)].append(steady_sps(timed["turns"], run.num_envs * run.num_steps))
-                iteration_times[(env_id, *v)] += timed["turns"][2:-1]  # not the setup, the first iteration, the final checkpoint
+                iteration_times[(env_id, *v)] += timed["turns"][
+                    2:-1
+                ]  # not the setup, the first iteration, the final checkpoint
                 update_times[(env_id, *v)] += timed["updates"][1:]
             if args.cleanrl_dir and not repeat % 2:
                 cleanrl_runs[env_id].append(cleanrl_sps(args, env_id, make_args(1.0)))
@@ -322,7 +328,10 @@ def main() -> None:
                 overhead_with_interval(*(np.array(times[(env_id, g, compiled)]) for g in (1.0, 1.1)))
                 for times in (iteration_times, update_times)
             )
-            iterations, updates = len(iteration_times[(env_id, 1.0, compiled)]), len(update_times[(env_id, 1.0, compiled)])
+            iterations, updates = (
+                len(iteration_times[(env_id, 1.0, compiled)]),
+                len(update_times[(env_id, 1.0, compiled)]),
+            )
             if args.cleanrl_dir:
                 speedup = f"{paired_ratio(sps[(env_id, 1.1, compiled)], cleanrl_runs[env_id]):.2f}x (same run)"
             else:
@@ -331,7 +340,11 @@ def main() -> None:
             rows += [
                 (env_id, f"training SPS, guidance 1.0 (PPO){flag}", f"{ppo:,.0f}"),
                 (env_id, f"training SPS, guidance 1.1 (PGG){flag}", f"{pgg:,.0f}"),
-                (env_id, f"PGG time overhead{flag}, whole runs: median of SPS(1.0)/SPS(1.1) - 1", f"{pgg_cost - 1:+.1%}"),
+                (
+                    env_id,
+                    f"PGG time overhead{flag}, whole runs: median of SPS(1.0)/SPS(1.1) - 1",
+                    f"{pgg_cost - 1:+.1%}",
+                ),
                 (env_id, f"PGG time overhead{flag}, {iterations} paired iterations (95% CI)", iteration_cost),
                 (env_id, f"PGG time overhead{flag}, {updates} paired PPO updates (95% CI)", update_cost),
                 (env_id, f"training speed-up over CleanRL, PGG at 1.1{flag}", speedup),
@@ -364,7 +377,10 @@ def main() -> None:
     for env_id, what, value in rows:
         print(f"{env_id:12s} {what:{width}s} {value}")
     for (env_id, guidance, compiled), values in sps.items():
-        print(f"{env_id:12s} SPS per repeat, {guidance}{' --compile' if compiled else ''}: " + ", ".join(f"{v:,.0f}" for v in values))
+        print(
+            f"{env_id:12s} SPS per repeat, {guidance}{' --compile' if compiled else ''}: "
+            + ", ".join(f"{v:,.0f}" for v in values)
+        )
     for env_id, values in cleanrl_runs.items():
         if values:
             print(f"{env_id:12s} SPS per repeat, cleanrl: " + ", ".join(f"{v:,.0f}" for v in values))

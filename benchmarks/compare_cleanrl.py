@@ -41,11 +41,11 @@ import gymnasium as gym
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import tyro  # noqa: E402
-from scipy import stats  # noqa: E402
-from tensorboard.backend.event_processing.event_accumulator import EventAccumulator  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import tyro
+from scipy import stats
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -464,10 +464,12 @@ def summary(a: Analysis, figure: str) -> str:
     lines = [
         f"# Our PPO against CleanRL's: {a.env_id}",
         "",
-        f"{a.seeds_text}, `--total-timesteps {a.total_timesteps}`. CleanRL trained {a.trained['cleanrl']:,} "
-        f"steps, ours {a.trained['ours']:,} (CleanRL floors the number of iterations, we round it up), so both "
-        f"are scored on the episodes ending in the first {a.end:,} steps, and on those ending in the last "
-        f"tenth of them ({0.9 * a.end:,.0f} to {a.end:,}). Mean ± sd over seeds; Welch's t-test.",
+        (
+            f"{a.seeds_text}, `--total-timesteps {a.total_timesteps}`. CleanRL trained {a.trained['cleanrl']:,} "
+            f"steps, ours {a.trained['ours']:,} (CleanRL floors the number of iterations, we round it up), so both "
+            f"are scored on the episodes ending in the first {a.end:,} steps, and on those ending in the last "
+            f"tenth of them ({0.9 * a.end:,.0f} to {a.end:,}). Mean ± sd over seeds; Welch's t-test."
+        ),
         "",
         row("score", a.labels["ours"], a.labels["cleanrl"], "Welch p"),
         "|---|---|---|---|",
@@ -479,8 +481,10 @@ def summary(a: Analysis, figure: str) -> str:
     if a.env_id in PUBLISHED:
         mean, sd = PUBLISHED[a.env_id]
         lines += [
-            f"For context, CleanRL's published end-of-training return on {a.env_id} is {mean:.2f} ± {sd:.2f} "
-            "(its documentation: other machines, seeds and library versions).",
+            (
+                f"For context, CleanRL's published end-of-training return on {a.env_id} is {mean:.2f} ± {sd:.2f} "
+                "(its documentation: other machines, seeds and library versions)."
+            ),
             "",
         ]
     lines += [
@@ -492,7 +496,7 @@ def summary(a: Analysis, figure: str) -> str:
         lines.append(row(str(seed), *(f"{v:.1f}" for impl in IMPLS for v in by_seed[impl].get(seed, (np.nan,) * 2))))
     lines += ["", row("", a.labels["ours"], a.labels["cleanrl"]), "|---|---|---|"]
     for name in ("python", "torch", "numpy", "gymnasium", "mujoco"):
-        lines.append(row(name, *a.per_impl(lambda meta: meta["stack"][name])))
+        lines.append(row(name, *a.per_impl(lambda meta, name=name: meta["stack"][name])))
     lines += [
         row("training script, sha256", *a.per_impl(lambda meta: f"{meta['script']}, {meta['script_sha256'][:12]}")),
         row("CPU", *a.per_impl(itemgetter("cpu"))),

@@ -24,7 +24,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
-from compare_revisions import CHILD_ENV, WORKTREE, export  # noqa: E402
+from compare_revisions import CHILD_ENV, WORKTREE, export
 
 
 @dataclass
@@ -53,7 +53,9 @@ def scores(tree: Path, script: str, args: Args, compile: bool = False) -> np.nda
                        str(args.total_timesteps), "--guidance", str(args.guidance), "--seed", str(seed),
                        "--output-dir", tmp, "--run-name", "run", "--checkpoint-interval", str(args.total_timesteps),
                        *(["--compile"] if compile else [])]  # fmt: skip
-            done = subprocess.run(command, cwd=tree, env=dict(CHILD_ENV, PYTHONPATH=str(tree)), capture_output=True, text=True)
+            done = subprocess.run(
+                command, cwd=tree, env=dict(CHILD_ENV, PYTHONPATH=str(tree)), capture_output=True, text=True
+            )
             if done.returncode:
                 sys.exit(f"error: {script} at {tree.name} failed: {(done.stderr.strip().splitlines() or ['?'])[-1]}")
             events = EventAccumulator(str(Path(tmp, "run")))
@@ -80,10 +82,14 @@ def main() -> None:
             export(args.rev, trees["reference"])
             export(WORKTREE, trees["working tree"])
         except subprocess.CalledProcessError as e:
-            sys.exit(f"error: cannot export {args.rev}: {e.stderr.decode().strip().splitlines()[-1] if e.stderr else e}")
+            sys.exit(
+                f"error: cannot export {args.rev}: {e.stderr.decode().strip().splitlines()[-1] if e.stderr else e}"
+            )
         results = {
             args.rev: scores(trees["reference"], script, args),
-            "working tree" + (" --compile" if args.compile else ""): scores(trees["working tree"], script, args, args.compile),
+            "working tree" + (" --compile" if args.compile else ""): scores(
+                trees["working tree"], script, args, args.compile
+            ),
         }
     print(f"{script} on {args.env_id}, {args.seeds} seeds x {args.total_timesteps:,} steps, guidance {args.guidance:g}")
     for i, what in enumerate(("mean return over the run", "mean return, last tenth")):

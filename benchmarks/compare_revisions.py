@@ -23,16 +23,17 @@ runs made seconds apart is what holds).
 """
 
 import csv
+import math
 import os
 import shutil
 import subprocess
 import sys
-from statistics import median
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from statistics import median
 
 import torch
 import tyro
@@ -113,12 +114,20 @@ def run_all(tree: Path, skip_quick: bool) -> None:
         for name, command in TRAINING.items():
             run(tree, [*command, "--output-dir", "out/runs", "--run-name", name], log)
         humanoid = tree / "out/runs/humanoid_resumed/checkpoints"
-        final = sorted(humanoid.glob("step_*.pt"))[-1]
+        final = max(humanoid.glob("step_*.pt"))
         final.unlink()
-        run(tree, [*TRAINING["humanoid_resumed"], "--output-dir", "out/runs", "--run-name", "humanoid_resumed", "--resume"], log)
+        run(
+            tree,
+            [*TRAINING["humanoid_resumed"], "--output-dir", "out/runs", "--run-name", "humanoid_resumed", "--resume"],
+            log,
+        )
         for name, (trained, options) in SWEEPS.items():
-            checkpoint = sorted((tree / f"out/runs/{trained}/checkpoints").glob("step_*.pt"))[-1]
-            run(tree, ["eval_gamma_sweep.py", str(checkpoint.relative_to(tree)), *options, "--output", f"out/{name}"], log)
+            checkpoint = max((tree / f"out/runs/{trained}/checkpoints").glob("step_*.pt"))
+            run(
+                tree,
+                ["eval_gamma_sweep.py", str(checkpoint.relative_to(tree)), *options, "--output", f"out/{name}"],
+                log,
+            )
         if not skip_quick:
             run(tree, [*QUICK, "--root", "out/quick_runs", "--results", "out/quick_results"], log)
 
@@ -137,8 +146,8 @@ def compare_speed(trees: dict[str, Path], pairs: int) -> None:
         for i in range(pairs):
             order = ("base", "head") if i % 2 == 0 else ("head", "base")
             times = {label: timed_run(trees[label], command) for label in order}
-            for label in times:
-                seconds[label].append(times[label])
+            for label, wall in times.items():
+                seconds[label].append(wall)
             ratios.append(times["head"] / times["base"])
         print(f"{name}: base {median(seconds['base']):.1f} s, head {median(seconds['head']):.1f} s (medians); "
               f"head/base {median(ratios):.3f} (range {min(ratios):.3f} to {max(ratios):.3f}, {pairs} pairs)", flush=True)  # fmt: skip
@@ -148,7 +157,11 @@ def compare_values(a, b, where: str, differences: list[str], added: list[str]) -
     if isinstance(a, torch.Tensor) or isinstance(b, torch.Tensor):
         same = isinstance(a, torch.Tensor) and isinstance(b, torch.Tensor) and a.dtype == b.dtype \
             and a.shape == b.shape and torch.equal(a, b)  # fmt: skip
-        if any(name in where for name in MUJOCO_SCRATCH) and isinstance(a, torch.Tensor) and isinstance(b, torch.Tensor):
+        if (
+            any(name in where for name in MUJOCO_SCRATCH)
+            and isinstance(a, torch.Tensor)
+            and isinstance(b, torch.Tensor)
+        ):
             same = a.shape == b.shape
         if not same:
             differences.append(f"{where}: tensors differ")
@@ -162,7 +175,7 @@ def compare_values(a, b, where: str, differences: list[str], added: list[str]) -
     elif isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)) and len(a) == len(b):
         for i, (x, y) in enumerate(zip(a, b)):
             compare_values(x, y, f"{where}[{i}]", differences, added)
-    elif a != b and not (a != a and b != b):  # NaN equals NaN here
+    elif a != b and not (isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)):
         differences.append(f"{where}: {a!r} != {b!r}")
 
 
@@ -196,7 +209,7 @@ def compare_trees(base: Path, head: Path) -> tuple[list[str], list[str], int]:
             continue
         compared += 1
         if kind == ".pt":
-            load = lambda p: torch.load(p, map_location="cpu", weights_only=True)  # noqa: E731
+            load = lambda p: torch.load(p, map_location="cpu", weights_only=True)
             compare_values(load(base / name), load(head / name), str(name), differences, added)
         elif kind == ".csv":
             compare_csv(base / name, head / name, str(name), differences, added)

@@ -50,9 +50,7 @@ def cells(path: str) -> dict:
         configs[(r["env_id"], r["variant"])].add((r["config"], r["train_guidance"], r["cond_dropout"]))
     for (env, variant), found in configs.items():
         if len(found) > 1:
-            raise InputError(
-                f"{path} has {len(found)} configurations of {variant} on {env}; compare one at a time"
-            )
+            raise InputError(f"{path} has {len(found)} configurations of {variant} on {env}; compare one at a time")
     return {(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])): r for r in rows}
 
 

@@ -97,7 +97,9 @@ def read_markers(pixels: np.ndarray) -> list[dict]:
                 if len(hits) >= MIN_MARKER_PIXELS:
                     y = top + float(np.median(hits))
                     value = round(v1 + (y - y1) * (v2 - v1) / (y2 - y1), 1)
-                rows.append({"env_id": env, "step": step, "line": line, "eval_guidance": gamma, "paper_figure_mean": value})
+                rows.append(
+                    {"env_id": env, "step": step, "line": line, "eval_guidance": gamma, "paper_figure_mean": value}
+                )
     return rows
 
 
@@ -118,7 +120,9 @@ def dropout_cells(summary: list[dict]) -> dict:
             continue
         key = (row["env_id"], row["step"], row["eval_guidance"])
         if key in cells:
-            sys.exit(f"error: two configurations of the dropout models at {key}: {cells[key]['config']}, {row['config']}")
+            sys.exit(
+                f"error: two configurations of the dropout models at {key}: {cells[key]['config']}, {row['config']}"
+            )
         cells[key] = row
     return cells
 
@@ -135,8 +139,12 @@ def comparison_table(readings: list[dict], summary: list[dict]) -> str:
         paper = r["paper_figure_mean"]
         paper_text = "hidden under another marker" if paper is None else f"{paper:.1f}"
         ours_text = "not run" if ours is None else f"{ours['mean']:.1f} ± {ours['ci95']:.1f}"
-        inside = "" if paper is None or ours is None else ("yes" if abs(paper - ours["mean"]) <= ours["ci95"] else "**no**")
-        lines.append(f"| {r['env_id']} | {step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |")
+        inside = (
+            "" if paper is None or ours is None else ("yes" if abs(paper - ours["mean"]) <= ours["ci95"] else "**no**")
+        )
+        lines.append(
+            f"| {r['env_id']} | {step_label(r['step'])} | {r['eval_guidance']:g} | {paper_text} | {ours_text} | {inside} |"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -157,13 +165,17 @@ def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, st
         if at_1 is None:
             continue
         row = {"env": env, "at_1": at_1, "welch": [], "paired": None}
-        for ppo in [r for r in summary if (r["env_id"], r["variant"], r["step"], r["eval_guidance"]) == (env, "ppo", step, 1.0)]:
+        for ppo in [
+            r for r in summary if (r["env_id"], r["variant"], r["step"], r["eval_guidance"]) == (env, "ppo", step, 1.0)
+        ]:
             p = stats.ttest_ind(list(seed_means(at_1).values()), list(seed_means(ppo).values()), equal_var=False).pvalue
             row["welch"].append((ppo, p))
         if at_12 is not None:
             before, after = seed_means(at_1), seed_means(at_12)
             if set(before) != set(after):
-                sys.exit(f"error: {env} at {step}: γ 1 and 1.2 have different seeds ({sorted(before)} vs {sorted(after)})")
+                sys.exit(
+                    f"error: {env} at {step}: γ 1 and 1.2 have different seeds ({sorted(before)} vs {sorted(after)})"
+                )
             diffs = np.array([after[seed] - before[seed] for seed in sorted(before)])
             half = stats.t.ppf(0.975, len(diffs) - 1) * diffs.std(ddof=1) / np.sqrt(len(diffs))
             row["paired"] = (diffs.mean(), half, stats.ttest_1samp(diffs, 0.0).pvalue)
@@ -228,7 +240,9 @@ def open_image(path: Path) -> Image.Image:
 def main(args: Args) -> None:
     paper = open_image(args.figure)
     if paper.size != FIGURE_SIZE:
-        sys.exit(f"error: {args.figure} is {paper.size[0]}x{paper.size[1]}; the calibration is for the paper's {FIGURE_SIZE[0]}x{FIGURE_SIZE[1]} rendering")
+        sys.exit(
+            f"error: {args.figure} is {paper.size[0]}x{paper.size[1]}; the calibration is for the paper's {FIGURE_SIZE[0]}x{FIGURE_SIZE[1]} rendering"
+        )
     if (args.beside is None) != (args.output is None):
         sys.exit("error: --beside and --output go together")
     if (args.ours is None) != (args.table is None):
@@ -242,7 +256,10 @@ def main(args: Args) -> None:
     ours_figure = open_image(args.beside) if args.beside is not None else None
     rows = read_markers(np.asarray(paper.convert("RGB")).astype(int))
     if args.csv is not None:
-        unread_as_nan = [{**r, "paper_figure_mean": math.nan if r["paper_figure_mean"] is None else r["paper_figure_mean"]} for r in rows]
+        unread_as_nan = [
+            {**r, "paper_figure_mean": math.nan if r["paper_figure_mean"] is None else r["paper_figure_mean"]}
+            for r in rows
+        ]
         plot_results.write_csv(args.csv, unread_as_nan, [])  # NaN is written as an empty field
         print(f"wrote {args.csv} ({sum(r['paper_figure_mean'] is not None for r in rows)} of {len(rows)} markers read)")
     if args.beside is not None:
@@ -251,7 +268,9 @@ def main(args: Args) -> None:
     if args.ours is not None:
         summary = our_summary(args.ours, args.provenance)
         with open(PAPER_TABLES) as f:
-            paper_ppo = {(r["env_id"], int(r["step"])): float(r["mean"]) for r in csv.DictReader(f) if r["method"] == "ppo"}
+            paper_ppo = {
+                (r["env_id"], int(r["step"])): float(r["mean"]) for r in csv.DictReader(f) if r["method"] == "ppo"
+            }
         text = ("# The dropout ablation against the paper's figure\n\n## Does dropout, or guidance on top of it, cost return?\n\n"
                 + effects_table(rows, summary, paper_ppo) + "\n## Every read marker beside our cell\n\n"
                 + comparison_table(rows, summary))  # fmt: skip

@@ -3,7 +3,7 @@ arithmetic (measured in benchmarks/README.md, equality tested in tests/test_equi
 
 import numpy as np
 import torch
-import torch.nn as nn
+from torch import nn
 
 
 def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
@@ -23,7 +23,9 @@ def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
 
 def numpy_layers(mlp: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
     """(weight transposed, bias) of each Linear layer, as numpy views of the parameters."""
-    return [(layer.weight.detach().numpy().T, layer.bias.detach().numpy()) for layer in mlp if isinstance(layer, nn.Linear)]
+    return [
+        (layer.weight.detach().numpy().T, layer.bias.detach().numpy()) for layer in mlp if isinstance(layer, nn.Linear)
+    ]
 
 
 def numpy_forward(layers, x: np.ndarray) -> np.ndarray:

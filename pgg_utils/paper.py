@@ -73,7 +73,9 @@ def action_kind(env_id: str) -> str:
     try:
         env = gym.make(env_id)
     except Exception as e:  # unknown ids, missing dependencies: whatever the env's import raises
-        raise ValueError(f"cannot make environment {env_id!r}: {str(e).splitlines()[0] if str(e) else type(e).__name__}") from None
+        raise ValueError(
+            f"cannot make environment {env_id!r}: {str(e).splitlines()[0] if str(e) else type(e).__name__}"
+        ) from None
     space = env.action_space
     env.close()
     if isinstance(space, gym.spaces.Discrete):

@@ -7,7 +7,9 @@ import time
 def format_duration(seconds: float) -> str:
     """`1h05m` from an hour on, `4m07s` below it."""
     seconds = int(seconds)
-    return f"{seconds // 3600}h{seconds % 3600 // 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
+    return (
+        f"{seconds // 3600}h{seconds % 3600 // 60:02d}m" if seconds >= 3600 else f"{seconds // 60}m{seconds % 60:02d}s"
+    )
 
 
 class Progress:
@@ -34,7 +36,9 @@ class Progress:
 
     def line(self, done: int, details: str = "") -> str:
         rate = self.rate(done)
-        eta = format_duration((self.total - done) / rate) if rate > 0 else ("0m00s" if done >= self.total else "unknown")
+        eta = (
+            format_duration((self.total - done) / rate) if rate > 0 else ("0m00s" if done >= self.total else "unknown")
+        )
         unit = f" {self.unit}" if self.unit else ""
         return f"{done:,}/{self.total:,}{unit}  {details + '  ' if details else ''}ETA {eta}"
 

@@ -99,7 +99,11 @@ def video_error(env: gym.Env) -> str | None:
     except ImportError as e:
         return f"--capture-video needs the [video] extra (pip install -e '.[video]'): {e}"
     except Exception as e:  # rendering backends fail with anything from OpenGL, pygame or MuJoCo
-        hint = "; headless MuJoCo needs MUJOCO_GL=egl or osmesa (apt-get install libosmesa6)" if "mujoco" in type(env.unwrapped).__module__ else ""
+        hint = (
+            "; headless MuJoCo needs MUJOCO_GL=egl or osmesa (apt-get install libosmesa6)"
+            if "mujoco" in type(env.unwrapped).__module__
+            else ""
+        )
         return f"--capture-video cannot render {env.spec.id} here ({type(e).__name__}: {e}){hint}"
     return None
 
@@ -112,7 +116,9 @@ def checkpoint_marks(total_timesteps: int, interval: int, batch_size: int) -> li
     one per iteration (interval >= batch_size), so a multiple that the last iteration passes is left
     to the total's checkpoint."""
     last_iteration = -(-total_timesteps // batch_size)
-    return [m for m in range(interval, total_timesteps, interval) if -(-m // batch_size) < last_iteration] + [total_timesteps]
+    return [m for m in range(interval, total_timesteps, interval) if -(-m // batch_size) < last_iteration] + [
+        total_timesteps
+    ]
 
 
 def checkpoint_path(run_dir: Path, mark: int) -> Path:
@@ -148,15 +154,24 @@ def package_versions() -> dict[str, str | None]:
 def code_revision(script: Path) -> dict:
     """The training code of a run, the script and the pgg_utils modules it loaded: the git commit of
     its checkout where there is one (and whether those files differ from it), and always their sha1."""
-    package = sorted(Path(m.__file__).resolve() for name, m in list(sys.modules.items()) if name.startswith("pgg_utils.") and m.__file__)
+    package = sorted(
+        Path(m.__file__).resolve()
+        for name, m in list(sys.modules.items())
+        if name.startswith("pgg_utils.") and m.__file__
+    )
     files = [Path(script).resolve(), *package]
     digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()
     commit = modified = None
     try:
         git = ["git", "-C", str(Path(script).resolve().parent)]
-        commit = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip() or None
+        commit = (
+            subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip()
+            or None
+        )
         if commit:
-            status = subprocess.run([*git, "status", "--porcelain", "--", *map(str, files)], capture_output=True, text=True, timeout=10)
+            status = subprocess.run(
+                [*git, "status", "--porcelain", "--", *map(str, files)], capture_output=True, text=True, timeout=10
+            )
             modified = bool(status.stdout.strip())
     except (OSError, subprocess.SubprocessError):  # no git, or not a checkout
         commit = None
@@ -165,7 +180,11 @@ def code_revision(script: Path) -> dict:
 
 def non_finite(state: dict) -> list[str]:
     """The names of the tensors of a state dict that hold a NaN or an infinity."""
-    return [name for name, value in state.items() if torch.is_tensor(value) and value.is_floating_point() and not torch.isfinite(value).all()]
+    return [
+        name
+        for name, value in state.items()
+        if torch.is_tensor(value) and value.is_floating_point() and not torch.isfinite(value).all()
+    ]
 
 
 def read_checkpoint_file(path: Path) -> dict:
@@ -189,7 +208,9 @@ def checkpoint_bytes(payload: dict) -> bytes:
     try:
         torch.load(io.BytesIO(data), map_location="cpu", weights_only=True)
     except Exception as e:
-        raise CheckpointError(f"the checkpoint would not load back ({str(e).splitlines()[0] if str(e) else type(e).__name__})") from None
+        raise CheckpointError(
+            f"the checkpoint would not load back ({str(e).splitlines()[0] if str(e) else type(e).__name__})"
+        ) from None
     return data
 
 
@@ -281,7 +302,9 @@ def env_state(envs) -> list[dict]:
             # tasks read them (Humanoid's reward and observation): mj_forward would not restore them.
             data = task.data
             arrays = {name: getattr(data, name) for name in dir(data) if not name.startswith("_")}
-            states[-1]["mujoco"] = {name: torch.from_numpy(a.copy()) for name, a in arrays.items() if isinstance(a, np.ndarray)}
+            states[-1]["mujoco"] = {
+                name: torch.from_numpy(a.copy()) for name, a in arrays.items() if isinstance(a, np.ndarray)
+            }
             states[-1]["mujoco_time"] = float(data.time)
     return states
 
@@ -395,7 +418,9 @@ class Run:
                               "it would diverge again; train with other arguments, or pass --overwrite")  # fmt: skip
         recorded = training_arguments(ckpt.get("args", {}), self.defaults())
         wanted = training_arguments(asdict(args), self.defaults())
-        differing = [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
+        differing = [
+            f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]
+        ]
         if differing:
             raise RunDirError(
                 f"{self.dir} holds a run with other arguments ({', '.join(differing)}): "
@@ -454,7 +479,7 @@ class Run:
         self.writer = SummaryWriter(str(self.dir), purge_step=resumed["global_step"] + 1 if resumed else None)
         self.writer.add_text(
             "hyperparameters",
-            "|param|value|\n|-|-|\n%s" % "\n".join(f"|{key}|{value}|" for key, value in asdict(args).items()),
+            "|param|value|\n|-|-|\n{}".format("\n".join(f"|{key}|{value}|" for key, value in asdict(args).items())),
         )
         return self.writer
 
@@ -594,7 +619,9 @@ def launch(args, kind: str, script: str, train) -> None:
     except (KeyboardInterrupt, OSError, NonFiniteError, CheckpointError) as e:
         latest = latest_checkpoint(run.dir)
         if isinstance(e, KeyboardInterrupt):
-            kept = f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
+            kept = (
+                f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
+            )
             print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
             sys.exit(130)
         message = str(e)

@@ -13,9 +13,9 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 torch.set_num_threads(1)
 
-import ppo_pgg_continuous  # noqa: E402
-import ppo_pgg_discrete  # noqa: E402
-from pgg_utils import runs  # noqa: E402
+import ppo_pgg_continuous
+import ppo_pgg_discrete
+from pgg_utils import runs
 
 SCRIPTS = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
 
@@ -24,9 +24,9 @@ def small_args(kind: str, tmp_path, **overrides):
     """A run of a few iterations with a checkpoint every few: discrete CartPole, continuous Humanoid
     (the task whose observation and reward read quantities MuJoCo derives a step late)."""
     base = {
-        "discrete": dict(total_timesteps=1536, checkpoint_interval=512, num_steps=64),
-        "continuous": dict(env_id="Humanoid-v4", total_timesteps=768, checkpoint_interval=256, num_steps=256,
-                           num_minibatches=4, update_epochs=2),
+        "discrete": {"total_timesteps": 1536, "checkpoint_interval": 512, "num_steps": 64},
+        "continuous": {"env_id": "Humanoid-v4", "total_timesteps": 768, "checkpoint_interval": 256, "num_steps": 256,
+                           "num_minibatches": 4, "update_epochs": 2},
     }[kind]  # fmt: skip
     return replace(SCRIPTS[kind].Args(output_dir=str(tmp_path), guidance=1.1, cond_dropout=0.1, **base), **overrides)
 
@@ -38,12 +38,18 @@ def train(module, args) -> Path:
 
 def run_script(script: str, *flags, **kwargs) -> subprocess.CompletedProcess:
     """Runs one of the repository's scripts (e.g. "ppo_pgg_discrete.py") as a command."""
-    return subprocess.run([sys.executable, str(ROOT / script), *flags], capture_output=True, text=True, timeout=300, **kwargs)
+    return subprocess.run(
+        [sys.executable, str(ROOT / script), *flags], capture_output=True, text=True, timeout=300, **kwargs
+    )
 
 
 def one_line_error(proc: subprocess.CompletedProcess, code: int = 2) -> str:
     """The one line of error, besides gymnasium's expected two-line notice that v4 tasks are old."""
-    lines = [line for line in proc.stderr.strip().splitlines() if "DeprecationWarning" not in line and "logger.deprecation(" not in line]
+    lines = [
+        line
+        for line in proc.stderr.strip().splitlines()
+        if "DeprecationWarning" not in line and "logger.deprecation(" not in line
+    ]
     assert proc.returncode == code and len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
     return lines[0]
 

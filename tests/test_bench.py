@@ -5,14 +5,16 @@ import threading
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
 import ppo_pgg_discrete as pgg
-from conftest import ROOT
 from pgg_utils import runs
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
-import bench_speed  # noqa: E402
-import compare_cleanrl  # noqa: E402
+import itertools
+
+import bench_speed
+import compare_cleanrl
 
 
 def tiny_run(guidance: float, seed: int = 1) -> pgg.Args:
@@ -33,7 +35,7 @@ def test_interleaved_runs_take_strict_turns_one_iteration_at_a_time(monkeypatch)
     timed = bench_speed.interleaved_training(pgg, [tiny_run(1.0), tiny_run(1.1)])
 
     assert len(workers) == 6 and len(set(workers)) == 2
-    assert all(a != b for a, b in zip(workers, workers[1:]))  # A, B, A, B, A, B
+    assert all(a != b for a, b in itertools.pairwise(workers))  # A, B, A, B, A, B
     for run in timed:
         assert len(run["turns"]) == 4  # the setup, then one per iteration
         assert len(run["updates"]) == 3 and all(u > 0 for u in run["updates"])

@@ -8,9 +8,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from conftest import ROOT, small_args, train
 
 import ppo_pgg_continuous as pgg
-from conftest import ROOT, small_args, train
 from pgg_utils import runs
 from pgg_utils.paper import PAPER_ENVS
 
@@ -23,8 +23,8 @@ def run(args: pgg.Args):
 
 def tiny_args(tmp_path, **overrides) -> pgg.Args:
     """Two checkpoints of PPO on InvertedPendulum, 2 iterations of 512 steps."""
-    base = dict(env_id="InvertedPendulum-v4", total_timesteps=1024, num_steps=512, num_minibatches=8, update_epochs=2,
-                checkpoint_interval=512, guidance=1.0, cond_dropout=0.0)  # fmt: skip
+    base = {"env_id": "InvertedPendulum-v4", "total_timesteps": 1024, "num_steps": 512, "num_minibatches": 8, "update_epochs": 2,
+                "checkpoint_interval": 512, "guidance": 1.0, "cond_dropout": 0.0}  # fmt: skip
     return small_args("continuous", tmp_path, **{**base, **overrides})
 
 
@@ -84,7 +84,9 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_mean(self):
-        return torch.zeros(self.actor_logstd.shape[-1])  # never used: `guide` is patched to return the conditional branch
+        return torch.zeros(
+            self.actor_logstd.shape[-1]
+        )  # never used: `guide` is patched to return the conditional branch
 
     def guided_mean(self, obs, guidance, drop_mask=None):
         return self.actor_mean(obs)
@@ -160,14 +162,18 @@ def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
     """The agent's statistics equal those of gymnasium's NormalizeObservation on the sub-env (CleanRL's
     wrapper), stepped with the same actions: every observation a reset or step returns, terminal ones
     included, in the same order. Hopper with a 25-step time limit ends episodes both ways."""
-    short = lambda env_id, video_dir=None: lambda: gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25))  # noqa: E731
+    short = lambda env_id, video_dir=None: (
+        lambda: gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25))
+    )
     monkeypatch.setattr(pgg, "make_env", short)
     envs = pgg.make_vector_env("Hopper-v4", 1, seed=3, discount=0.99, reward_clip=10.0)
     agent = pgg.Agent(11, 3)
     policy = pgg.RolloutPolicy(agent, 1.0)
     buf = pgg.Rollout.empty(400, 1, 11, 3)
     raw_obs, _ = envs.reset(seed=3)
-    next_obs, next_done = pgg.collect_rollout(policy, envs, policy.observe(raw_obs), np.zeros(1, np.float32), buf, lambda *_: None, 0)
+    _next_obs, _next_done = pgg.collect_rollout(
+        policy, envs, policy.observe(raw_obs), np.zeros(1, np.float32), buf, lambda *_: None, 0
+    )
 
     def cleanrl_wrapper():
         wrapper = gym.wrappers.NormalizeObservation(gym.wrappers.ClipAction(short("Hopper-v4")()))
@@ -235,7 +241,9 @@ def test_reward_scaling_matches_gymnasium_bit_for_bit():
 
 
 def test_short_inverted_pendulum_run_learns(tmp_path):
-    run_dir = run(pgg.Args(env_id="InvertedPendulum-v4", total_timesteps=30_000, guidance=1.1, output_dir=str(tmp_path)))
+    run_dir = run(
+        pgg.Args(env_id="InvertedPendulum-v4", total_timesteps=30_000, guidance=1.1, output_dir=str(tmp_path))
+    )
     agent, _ = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 30_000))
     env = gym.make("InvertedPendulum-v4")
     returns = []
@@ -261,7 +269,9 @@ def test_paper_task_steps_through_env_factory(env_id):
     agent = pgg.Agent(obs.shape[1], envs.single_action_space.shape[0])
     policy = pgg.RolloutPolicy(agent, 1.1)
     buf = pgg.Rollout.empty(300, 2, obs.shape[1], envs.single_action_space.shape[0])
-    _, next_done = pgg.collect_rollout(policy, envs, policy.observe(obs), np.zeros(2, np.float32), buf, lambda *_: None, 0)
+    _, next_done = pgg.collect_rollout(
+        policy, envs, policy.observe(obs), np.zeros(2, np.float32), buf, lambda *_: None, 0
+    )
     assert torch.isfinite(buf.obs).all() and buf.rewards.abs().max() <= 10.0
     # First observations, one per step and sub-env, and each episode's last one.
     episode_ends = int(buf.dones[1:].sum() + next_done.sum())
@@ -271,7 +281,9 @@ def test_paper_task_steps_through_env_factory(env_id):
 def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls):
     args = tiny_args(tmp_path, total_timesteps=512, guidance=1.1, cond_dropout=0.25)
     eager = torch.load(runs.checkpoint_path(run(args), 512), weights_only=True)["model"]
-    compiled = torch.load(runs.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 512), weights_only=True)["model"]
+    compiled = torch.load(
+        runs.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 512), weights_only=True
+    )["model"]
     assert compiled_calls == [pgg.minibatch_loss] * (args.update_epochs * args.num_minibatches)
     for key, value in eager.items():  # one iteration's 16 Adam steps: the same update to float rounding
         torch.testing.assert_close(compiled[key], value, rtol=1e-4, atol=1e-5)
@@ -291,7 +303,11 @@ def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls)
 def test_bad_input_exits_with_one_line(flags, message):
     no_compiler = {key: value for key, value in os.environ.items() if key != "CXX"} | {"PATH": ""}
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "ppo_pgg_continuous.py"), *flags], capture_output=True, text=True, timeout=120, env=no_compiler
+        [sys.executable, str(ROOT / "ppo_pgg_continuous.py"), *flags],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=no_compiler,
     )
     lines = [line for line in proc.stderr.strip().splitlines() if "Warn" not in line and "deprecation" not in line]
     assert proc.returncode == 2 and len(lines) == 1 and message in lines[0], proc.stderr

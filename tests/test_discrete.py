@@ -7,10 +7,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-import torch.nn as nn
+from conftest import ROOT, small_args, train
+from torch import nn
 
 import ppo_pgg_discrete as pgg
-from conftest import ROOT, small_args, train
 from pgg_utils import runs
 
 
@@ -141,7 +141,9 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_logits(self):
-        return torch.zeros(self.actor[-1].out_features)  # never used: `guide` is patched to return the conditional branch
+        return torch.zeros(
+            self.actor[-1].out_features
+        )  # never used: `guide` is patched to return the conditional branch
 
     def guided_logits(self, obs, guidance, drop_mask=None):
         return self.actor(obs)
@@ -260,7 +262,9 @@ def test_short_cartpole_run_learns(tmp_path):
 def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls):
     args = tiny_args(tmp_path, total_timesteps=256, checkpoint_interval=256, guidance=1.1, cond_dropout=0.25)
     eager = torch.load(runs.checkpoint_path(run(args), 256), weights_only=True)["model"]
-    compiled = torch.load(runs.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 256), weights_only=True)["model"]
+    compiled = torch.load(
+        runs.checkpoint_path(run(replace(args, compile=True, run_name="compiled")), 256), weights_only=True
+    )["model"]
     assert compiled_calls == [pgg.minibatch_loss] * (args.update_epochs * args.num_minibatches)
     for key, value in eager.items():  # one iteration's 16 Adam steps: the same update to float rounding
         torch.testing.assert_close(compiled[key], value, rtol=1e-4, atol=1e-5)
@@ -285,7 +289,11 @@ def test_compile_flag_trains_through_the_compiled_loss(tmp_path, compiled_calls)
 def test_bad_input_exits_with_one_line(flags, message):
     no_compiler = {key: value for key, value in os.environ.items() if key != "CXX"} | {"PATH": ""}
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags], capture_output=True, text=True, timeout=120, env=no_compiler
+        [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env=no_compiler,
     )
     assert proc.returncode == 2
     lines = proc.stderr.strip().splitlines()

@@ -84,10 +84,14 @@ def test_numpy_rollout_policy_matches_agent(guidance):
         obs = policy.observe(raw)
         actions, logprobs, values = policy.act(obs, noise)
         mean = cagent.guided_mean(torch.from_numpy(obs), guidance)
-        torch.testing.assert_close(torch.from_numpy(actions), mean + cagent.actor_logstd.exp() * torch.from_numpy(noise))
+        torch.testing.assert_close(
+            torch.from_numpy(actions), mean + cagent.actor_logstd.exp() * torch.from_numpy(noise)
+        )
         expected = continuous.gaussian_log_prob(torch.from_numpy(actions), mean, cagent.actor_logstd)
         torch.testing.assert_close(torch.from_numpy(logprobs), expected, rtol=1e-5, atol=1e-5)
-        torch.testing.assert_close(torch.from_numpy(values), cagent.get_value(cagent.obs_norm(raw)), rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(
+            torch.from_numpy(values), cagent.get_value(cagent.obs_norm(raw)), rtol=1e-5, atol=1e-6
+        )
 
 
 def test_numpy_gae_equals_torch_gae_bit_for_bit():
@@ -124,13 +128,17 @@ def test_flat_fused_adam_update_matches_per_tensor_adam():
         agent = discrete.Agent(4, 2)
         initial = {key: value.clone() for key, value in agent.state_dict().items()}
         if flat:
-            optimizer = torch.optim.Adam([discrete.flatten_parameters(list(agent.parameters()))], lr=args.learning_rate, eps=1e-5, fused=True)
+            optimizer = torch.optim.Adam(
+                [discrete.flatten_parameters(list(agent.parameters()))], lr=args.learning_rate, eps=1e-5, fused=True
+            )
         else:
             optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, foreach=False)
         discrete.ppo_update(agent, optimizer, buf, advantages, returns, args)
         results.append(agent.state_dict())
     for key in results[0]:
-        assert not torch.equal(results[0][key], initial[key]), key  # every parameter, the null embedding included, moved
+        assert not torch.equal(results[0][key], initial[key]), (
+            key
+        )  # every parameter, the null embedding included, moved
         torch.testing.assert_close(results[0][key], results[1][key], rtol=1e-5, atol=1e-6)
 
 

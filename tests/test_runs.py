@@ -15,10 +15,10 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
 from pgg_utils import files, progress, runs
 from pgg_utils.files import lock_directory
 
@@ -34,6 +34,7 @@ def run_training(kind: str, *flags, **kwargs):
 def prepare(module, args) -> None:
     """Applies the run directory's rules as the script's main does before it trains (RunDirError)."""
     runs.Run.prepare(args, module.ACTION_SPACE, Path(module.__file__)).close()
+
 
 # --- resume ------------------------------------------------------------------------------------
 
@@ -98,7 +99,9 @@ def test_one_checkpoint_per_saved_iteration():
     assert runs.checkpoint_marks(2500, 1024, 256) == [1024, 2048, 2500]
 
 
-def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_previous_ones_whole(tmp_path, monkeypatch, capsys):
+def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_previous_ones_whole(
+    tmp_path, monkeypatch, capsys
+):
     """A checkpoint is written to a temporary file and renamed: a write that dies half way (full disk)
     leaves no step_*.pt and no .tmp behind, the earlier checkpoints as they were, and one line of error
     that names the file."""
@@ -118,7 +121,11 @@ def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_pre
         runs.launch(args, "discrete", ppo_pgg_discrete.__file__, ppo_pgg_discrete.train)
     error = capsys.readouterr().err.strip().splitlines()
     assert exit_status.value.code == 1 and len(error) == 1, error
-    assert "step_000001024.pt" in error[0] and "No space left on device" in error[0] and "step_000000512.pt are kept" in error[0]
+    assert (
+        "step_000001024.pt" in error[0]
+        and "No space left on device" in error[0]
+        and "step_000000512.pt are kept" in error[0]
+    )
     run_dir = tmp_path / runs.default_run_name(args)
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
     ppo_pgg_discrete.load_checkpoint(run_dir / "checkpoints" / "step_000000512.pt")
@@ -162,7 +169,11 @@ def test_checkpoint_records_the_software_stack(tmp_path):
     ckpt = checkpoint(train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
     assert ckpt["versions"]["torch"] == torch.__version__ and ckpt["versions"]["gymnasium"]
     # The training code: the script and the pgg_utils modules it ran, by commit and by content.
-    assert len(ckpt["code"]["sha1"]) == 40 and ckpt["code"]["files"][0] == "ppo_pgg_discrete.py" and "runs.py" in ckpt["code"]["files"]
+    assert (
+        len(ckpt["code"]["sha1"]) == 40
+        and ckpt["code"]["files"][0] == "ppo_pgg_discrete.py"
+        and "runs.py" in ckpt["code"]["files"]
+    )
     assert ckpt["code"]["commit"] is None or len(ckpt["code"]["commit"]) == 40
 
 
@@ -250,7 +261,9 @@ def test_progress_is_a_live_bar_in_a_terminal_and_plain_lines_in_a_log(tmp_path,
     flags = ["--output-dir", str(tmp_path), "--total-timesteps", "4096", "--checkpoint-interval", "4096"]
     command = [sys.executable, str(ROOT / "ppo_pgg_discrete.py"), *flags]
     controller, terminal = pty.openpty()
-    proc = subprocess.Popen(command, stdin=terminal, stdout=terminal, stderr=terminal, env=dict(os.environ, COLUMNS="250"))
+    proc = subprocess.Popen(
+        command, stdin=terminal, stdout=terminal, stderr=terminal, env=dict(os.environ, COLUMNS="250")
+    )
     os.close(terminal)
     output = b""
     while True:
@@ -314,7 +327,11 @@ def test_kl_statistics_cover_kept_rows_only(kind):
                 layer.weight.normal_(0, 1.0)  # a policy far from uniform, so dropped rows really differ
     buf.obs.normal_()
     policy = module.RolloutPolicy(agent, 1.1)
-    noise = module.gumbel_noise(256, action_dim) if kind == "discrete" else np.random.default_rng(0).standard_normal((256, action_dim))
+    noise = (
+        module.gumbel_noise(256, action_dim)
+        if kind == "discrete"
+        else np.random.default_rng(0).standard_normal((256, action_dim))
+    )
     actions, logprobs, _ = policy.act(buf.obs[:, 0].numpy(), noise)
     buf.actions[:, 0] = torch.as_tensor(actions)
     buf.logprobs[:, 0] = torch.as_tensor(logprobs)
@@ -325,7 +342,10 @@ def test_kl_statistics_cover_kept_rows_only(kind):
     _, stats = module.minibatch_loss(agent, batch, torch.arange(256), drop_mask, args)
     assert abs(stats["losses/approx_kl"].item()) < 1e-6 and abs(stats["losses/old_approx_kl"].item()) < 1e-5
     assert stats["losses/clipfrac"].item() == 0.0
-    assert stats["pgg/dropped_abs_logratio"].item() > 0.05 and stats["pgg/dropped_fraction"].item() == drop_mask.float().mean()
+    assert (
+        stats["pgg/dropped_abs_logratio"].item() > 0.05
+        and stats["pgg/dropped_fraction"].item() == drop_mask.float().mean()
+    )
 
 
 # --- faults a newcomer found ---------------------------------------------------------------------
@@ -363,14 +383,18 @@ def test_a_checkpoint_that_would_not_load_back_stops_the_run_at_the_first_one(tm
     assert not list(tmp_path.rglob("step_*.pt")) and not list(tmp_path.rglob("*.tmp"))
 
 
-@pytest.mark.parametrize("kind,flags", [("discrete", ["--num-steps", "1"]), ("continuous", ["--num-minibatches", "2048"])])
+@pytest.mark.parametrize(
+    "kind,flags", [("discrete", ["--num-steps", "1"]), ("continuous", ["--num-minibatches", "2048"])]
+)
 def test_minibatches_too_small_to_normalise_advantages_are_refused(kind, flags, tmp_path):
     line = one_line_error(run_training(kind, "--output-dir", str(tmp_path / "runs"), *flags))
     assert "cannot normalise advantages" in line and "--no-norm-adv" in line
     assert not (tmp_path / "runs").exists()
 
 
-def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_finite_checkpoints(tmp_path, monkeypatch, capsys):
+def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_finite_checkpoints(
+    tmp_path, monkeypatch, capsys
+):
     real_update, calls = ppo_pgg_discrete.ppo_update, []
 
     def diverges_at_the_third(agent, *rest, **kwargs):
@@ -438,7 +462,9 @@ def test_a_task_without_a_vector_observation_is_refused_before_touching_the_disk
 
 
 def test_target_kl_with_every_row_dropped_is_refused(tmp_path):
-    line = one_line_error(run_training("discrete", "--cond-dropout", "1", "--target-kl", "0.01", "--output-dir", str(tmp_path)))
+    line = one_line_error(
+        run_training("discrete", "--cond-dropout", "1", "--target-kl", "0.01", "--output-dir", str(tmp_path))
+    )
     assert "--target-kl never triggers with --cond-dropout 1" in line
 
 

@@ -155,7 +155,9 @@ def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
             optimised = agent.guided_logits(obs, guidance)
         else:
             obs = agent.obs_norm(raw)
-            acted = ppo_pgg_continuous.guide(agent.actor_mean(obs).numpy(), agent.unconditional_mean().numpy(), guidance)
+            acted = ppo_pgg_continuous.guide(
+                agent.actor_mean(obs).numpy(), agent.unconditional_mean().numpy(), guidance
+            )
             optimised = agent.guided_mean(obs, guidance)
     np.testing.assert_array_equal(evaluated.numpy(), acted)
     torch.testing.assert_close(evaluated, optimised, rtol=1e-6, atol=1e-6)
@@ -323,7 +325,11 @@ def test_bad_input_in_a_fresh_process_is_one_line_without_traceback(runs, tmp_pa
     assert proc.returncode == 2 and proc.stderr.strip().splitlines() == [proc.stderr.strip()], proc.stderr
     assert proc.stderr.startswith("error: --gammas must be")
     proc = subprocess.run(
-        [*SCRIPT, str(runs / "discrete"), "--policy", "greedy"], check=False, capture_output=True, text=True, timeout=120
+        [*SCRIPT, str(runs / "discrete"), "--policy", "greedy"],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and "--policy" in proc.stderr  # no such option
 
@@ -396,7 +402,9 @@ def test_config_label_names_every_training_argument_that_differs(runs):
     hopper_label = "pgg_g1.1 num_minibatches=8 num_steps=1024 total_timesteps=2048 update_epochs=2"
     assert sweep.config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
     # A format-1 checkpoint records no versions: never pooled with runs whose stack is known.
-    assert sweep.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
+    assert (
+        sweep.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
+    )
 
 
 def test_runs_of_one_seed_number_in_different_configurations_stay_apart(runs, tmp_path):
@@ -610,13 +618,21 @@ def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     assert [p.name for p in written] == ["gamma_1.mp4", "gamma_5.mp4", "side_by_side.mp4"]
     agent, ckpt = sweep.load_any_checkpoint(path)
     policy = sweep.GuidedPolicy(agent, ckpt)
-    lengths = [int(sweep.evaluate_sequential(policy, ckpt, gamma, 3, args.eval_seed, False)[1][2]) for gamma in (1.0, 5.0)]
+    lengths = [
+        int(sweep.evaluate_sequential(policy, ckpt, gamma, 3, args.eval_seed, False)[1][2]) for gamma in (1.0, 5.0)
+    ]
     assert [frame_count(p) for p in written] == [lengths[0] + 1, lengths[1] + 1, max(lengths) + 1]
     assert not list((tmp_path / "videos").glob(".*tmp*"))
 
 
 def test_video_of_several_checkpoints_is_one_line_of_error(runs, tmp_path):
-    proc = subprocess.run([*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")], check=False, capture_output=True, text=True, timeout=120)
+    proc = subprocess.run(
+        [*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")],
+        check=False,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     lines = proc.stderr.strip().splitlines()
     assert proc.returncode == 2 and len(lines) == 1 and "--video records one checkpoint; 4 found" in lines[0]
     assert not (tmp_path / "v").exists()
@@ -632,7 +648,9 @@ def test_video_of_a_mujoco_checkpoint_where_a_gl_backend_renders(runs, tmp_path)
     proc = subprocess.run([*SCRIPT, str(checkpoint(runs, "continuous")), "--gammas", "1", "1.5", "--video", str(tmp_path / "v")],
                           check=False, capture_output=True, text=True, env=env, timeout=300)  # fmt: skip
     assert proc.returncode == 0, proc.stderr[-2000:]
-    assert frame_count(tmp_path / "v" / "side_by_side.mp4") >= max(frame_count(tmp_path / "v" / f"gamma_{g}.mp4") for g in ("1", "1.5"))
+    assert frame_count(tmp_path / "v" / "side_by_side.mp4") >= max(
+        frame_count(tmp_path / "v" / f"gamma_{g}.mp4") for g in ("1", "1.5")
+    )
 
 
 def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
