@@ -101,6 +101,8 @@ class Args:
     """at most this many array tasks at once"""
     skip_training: bool = False
     """only sweep and plot what is already trained"""
+    agents: bool = True
+    """export the agent of every swept checkpoint into <results>/agents (no optimizer or resume state), with a README listing them"""
     compile: bool = False
     """train with --compile (needs a C++ compiler): ~1.25x faster training, whose compile pays back after ~45k Hopper steps with inductor's cache warm, ~210k cold (benchmarks/README.md)"""
 
@@ -367,10 +369,41 @@ def reproduce(args: Args) -> int:
         write_atomic(results / name, (sweep_dir / name).read_bytes())
     written = plot_results.generate(plot_results.Args(sweeps=(str(results),), output=str(results),
                                                       runs=sweep_args.paths, compare_paper=True))  # fmt: skip
+    if args.agents:
+        written.append(export_agents(swept, results / "agents"))
     print(f"results in {results}: {len(written)} files", file=sys.stderr)
     for spec, log in tally.failed:
         print(f"failed: {spec.name}{f', log {log}' if log else ''}", file=sys.stderr)
     return len(tally.failed)
+
+
+def export_agents(specs: list[RunSpec], folder: Path) -> Path:
+    """Every checkpoint of `specs` as a shipped agent, in the sweep's layout
+    (<folder>/<run>/checkpoints/step_*.pt, so that eval_gamma_sweep.py sweeps the folder with the runs'
+    own names), and <folder>/README.md listing them with the command that trained each. Returns the
+    README's path."""
+    rows = ["| run | env | variant | seed | steps | trained by |", "|---|---|---|---|---|---|"]
+    for spec in specs:
+        checkpoints = runs.checkpoints_of(spec.run_dir)
+        for checkpoint in checkpoints:
+            runs.export_agent(checkpoint, folder / spec.name / "checkpoints" / checkpoint.name)
+        steps = ", ".join(f"{runs.checkpoint_step(c):,}" for c in checkpoints)
+        command = " ".join(["python", Path(spec.command()[1]).name, *spec.command()[2:]])
+        rows.append(f"| {spec.name} | {spec.env_id} | {spec.variant} | {spec.seed} | {steps} | `{command}` |")
+    readme = folder / "README.md"
+    write_atomic(readme, "\n".join([
+        "# Trained agents",
+        "",
+        "Each file is one checkpoint's agent: the weights (with the observation statistics), the training",
+        "arguments, the software versions and the code revision, without the optimizer and resume state;",
+        "pickle-free (`torch.load(path, weights_only=True)`). Sweep them with",
+        f"`python eval_gamma_sweep.py {folder} --output runs/sweeps/agents` (add `--gammas ...` for your own",
+        "γ values), watch one with `--video`, load one with `ppo_pgg_<kind>.load_checkpoint(path)`.",
+        "",
+        *rows,
+        "",
+    ]))  # fmt: skip
+    return readme
 
 
 def main() -> None:

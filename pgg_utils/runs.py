@@ -214,6 +214,14 @@ def checkpoint_bytes(payload: dict) -> bytes:
     return data
 
 
+def export_agent(checkpoint: Path, destination: Path) -> None:
+    """Writes a checkpoint as a shipped agent: everything the sweep, `--video` and `load_checkpoint`
+    read (weights with the observation statistics, arguments, versions, code revision), without the
+    optimizer and resume state; pickle-free (proven by loading it back) and atomic."""
+    agent = {key: value for key, value in read_checkpoint_file(checkpoint).items() if key != "resume"}
+    write_atomic(destination, checkpoint_bytes(agent))
+
+
 class CheckpointError(Exception):
     """A checkpoint that must not be written; the message is one line."""
 

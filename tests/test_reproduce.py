@@ -42,6 +42,24 @@ def test_quick_preset_runs_end_to_end_locally(local_results):
         assert (local_results / name).exists(), name
 
 
+def test_the_agents_are_exported_without_resume_state_and_sweep_to_the_same_episodes(local_results, tmp_path):
+    import torch
+
+    import eval_gamma_sweep
+
+    agents = local_results / "agents"
+    files = sorted(agents.rglob("step_*.pt"))
+    assert len(files) == 2 * 2 * 2  # seeds × variants × checkpoints
+    readme = (agents / "README.md").read_text()
+    assert "| CartPole-v1__pgg_g1.1__s2 | CartPole-v1 | pgg_g1.1 | 2 | 1,024, 2,048 |" in readme
+    agent = torch.load(files[0], weights_only=True)
+    assert "resume" not in agent and agent["model"] and agent["code"]["sha1"]
+    assert files[0].stat().st_size < 60_000
+    swept = eval_gamma_sweep.sweep(eval_gamma_sweep.Args(paths=(str(agents),), output=str(tmp_path / "sweep"),
+                                                         gammas=(1.0, 2.0), episodes=3))  # fmt: skip
+    assert (swept / "episodes.csv").read_text() == (local_results / "episodes.csv").read_text()
+
+
 def test_quick_preset_through_submitit_local_executor(local_results, tmp_path):
     assert reproduce.reproduce(tiny_args(tmp_path, "submitit", executor="submitit-local")) == 0
     results = tmp_path / "submitit" / "results"
