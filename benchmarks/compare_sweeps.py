@@ -24,7 +24,7 @@ import tyro
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
 from pgg_utils.agreement import compare_row, fmt, fmt_p, p_is, step_label
-from pgg_utils.files import InputError, write_atomic
+from pgg_utils.files import InputError, one_line_errors, write_atomic
 from pgg_utils.paper import paper_name
 from pgg_utils.stats import ALPHA, correct_family, sign_test
 
@@ -134,7 +134,7 @@ def report(rows: list[dict], labels: tuple[str, str], sources: tuple[str, str], 
 
 def main() -> None:
     args = tyro.cli(Args)
-    try:
+    with one_line_errors():
         first, second = cells(args.first), cells(args.second)
         rows = compare(first, second, args.labels[1])
         unmatched = (len(first.keys() - second.keys()), len(second.keys() - first.keys()))
@@ -143,13 +143,6 @@ def main() -> None:
             write_atomic(Path(args.output), text)
         else:
             print(text, end="")
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
-        message = f"cannot write {e.filename}: {e.strerror}" if e.filename else e.strerror or str(e)
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ import tyro
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
 from pgg_utils.agreement import fmt, fmt_p, step_label
-from pgg_utils.files import InputError, write_atomic, write_csv_atomic
+from pgg_utils.files import one_line_errors, write_atomic, write_csv_atomic
 from pgg_utils.paper import paper_name
 from pgg_utils.selection import BASELINE_GAMMA, GROUP_COLUMNS, INCOMPLETE, TESTED, held_out, summary_by_env
 from pgg_utils.stats import ALPHA
@@ -120,7 +120,7 @@ def report(rows: list[dict], unmatched: list[tuple], args: Args, ranges: tuple[s
 
 def main() -> None:
     args = tyro.cli(Args)
-    try:
+    with one_line_errors():
         selection, fresh = episodes(args.selection, args), episodes(args.fresh, args)
         rows, unmatched = held_out(selection, fresh)
         rows.sort(key=lambda r: (r["env_id"], plots.variant_rank(r["variant"]), r["variant"], r["config"], r["step"]))
@@ -128,13 +128,6 @@ def main() -> None:
         output = Path(args.output)
         write_csv_atomic(output / "heldout_gamma.csv", GROUP_COLUMNS, rows)
         write_atomic(output / "heldout_gamma.md", text)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
-        message = f"cannot write {e.filename}: {e.strerror}" if e.filename else e.strerror or str(e)
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
     for name in ("heldout_gamma.csv", "heldout_gamma.md"):
         print(output / name)
 

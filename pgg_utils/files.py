@@ -1,14 +1,31 @@
 """Atomic writes, CSVs and directory locks: one of each for every script."""
 
+import contextlib
 import csv
 import fcntl
 import io
 import os
+import sys
 from pathlib import Path
 
 
 class InputError(Exception):
     """Bad input: reported as one line, exit status 2."""
+
+
+@contextlib.contextmanager
+def one_line_errors(os_error_status: int = 2):
+    """A command's failures as one line on stderr, never a traceback: bad input (InputError) exits 2,
+    a failed file operation (OSError: a full disk, an unwritable folder) `os_error_status`."""
+    try:
+        yield
+    except InputError as e:
+        print(f"error: {e}", file=sys.stderr)
+        sys.exit(2)
+    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
+        named = e.filename and not (e.strerror or "").startswith("cannot")
+        print(f"error: {f'{e.filename}: {e.strerror}' if named else e.strerror or e}", file=sys.stderr)
+        sys.exit(os_error_status)
 
 
 def write_atomic(path: Path, data: bytes | str) -> None:
