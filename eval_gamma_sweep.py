@@ -14,17 +14,11 @@ action noise from its own stream, `np.random.default_rng([eval_seed + k, 1])`: t
 and noise for every γ and every checkpoint (common random numbers). The default eval_seed, 10_000,
 keeps evaluation seeds disjoint from the training scripts' (seed + env index, i.e. small integers).
 
-Exactness. A cell is computed by the same operations on the same shapes whatever else is swept:
-every policy forward of a cell has cell_rows(episodes) = max(episodes, 8) rows, in torch-allocated
-memory, from its first step to its last, and nothing of another cell enters its batch. On one machine
-and software stack a cell's rows are therefore bit-identical whether it is swept alone, beside other
-γ values, in a worker process, or after a resume; this does not rest on how the BLAS rounds products
-of different row counts (MKL with AVX-512 on Intel CPUs rounds a 16-row product differently from an
-8-row one). It does not hold across machines: another CPU may round differently, so the same
-checkpoint evaluated elsewhere gives statistically equal, not identical, episodes. The sequential
-one-env reference (evaluate_sequential, one observation per forward) agrees to rounding: identically
-on the AMD EPYC this was developed on, and within ~1e-7 relative (tested to rtol 1e-4) where the BLAS
-rounds by row count; over long MuJoCo episodes such differences can grow.
+Exactness. Every policy forward of a cell has cell_rows(episodes) = max(episodes, 8) rows, from its
+first step to its last, and nothing of another cell enters its batch: on one machine and software
+stack a cell's rows are bit-identical whether it is swept alone, beside other γ values, in a worker
+or after a resume; across machines they are statistically equal, not identical (benchmarks/README.md,
+"Exactness of the sweep").
 
 Configurations. A cell's seeds must be distinct runs of one training configuration. Every row
 carries `config` (config_label: the variant and every training argument that differs from the frozen
@@ -43,7 +37,6 @@ its 95% confidence interval, see `mean_ci95`).
 """
 
 import csv
-import functools
 import hashlib
 import io
 import json
@@ -71,6 +64,7 @@ from pgg_utils.paper import PAPER_GAMMAS, REFERENCE_ARGS, is_mujoco, variant_id
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
 from pgg_utils.stats import mean_ci95
+from pgg_utils.video import labelled, write_video
 
 # Policy forwards run on at least this many rows (padded). CPU BLAS rounds a 1-3 row product differently
 # from a larger one, so the one-row sequential reference pads to it; on the AMD EPYC this was written on,
@@ -753,40 +747,6 @@ def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, eval_seed: in
     )
     env.close()
     return frames, total
-
-
-@functools.cache
-def label_font():
-    """DejaVu Sans, which matplotlib ships and which has a γ (PIL's built-in bitmap font has none)."""
-    import matplotlib
-    from PIL import ImageFont
-
-    return ImageFont.truetype(str(Path(matplotlib.get_data_path(), "fonts", "ttf", "DejaVuSans.ttf")), 20)
-
-
-def labelled(frame: np.ndarray, text: str) -> np.ndarray:
-    """`frame` with `text` written in its top-left corner and a grey line down its right edge."""
-    from PIL import Image, ImageDraw
-
-    image = Image.fromarray(frame)
-    draw = ImageDraw.Draw(image)
-    box = draw.textbbox((10, 8), text, font=label_font())
-    draw.rectangle((box[0] - 5, box[1] - 4, box[2] + 5, box[3] + 4), fill=(255, 255, 255))
-    draw.text((10, 8), text, fill=(0, 0, 0), font=label_font())
-    draw.line((image.width - 1, 0, image.width - 1, image.height), fill=(128, 128, 128), width=2)
-    return np.asarray(image)
-
-
-def write_video(path: Path, frames: list[np.ndarray], fps: float) -> None:
-    """An mp4 with exactly these frames (moviepy's clips can drop the last one to float rounding of
-    their duration), through imageio's ffmpeg, which the [video] extra brings; written atomically."""
-    import imageio.v2 as imageio
-
-    tmp = path.with_name(f".{path.stem}.tmp{path.suffix}")  # the suffix picks the format
-    with imageio.get_writer(tmp, fps=fps, macro_block_size=1) as writer:
-        for frame in frames:
-            writer.append_data(frame)
-    os.replace(tmp, path)
 
 
 def record_videos(args: Args) -> list[Path]:

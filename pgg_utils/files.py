@@ -28,20 +28,30 @@ def one_line_errors(os_error_status: int = 2):
         sys.exit(os_error_status)
 
 
-def write_atomic(path: Path, data: bytes | str) -> None:
-    """Writes `data` to `path` through a temporary file beside it, so that `path` holds either its
-    old or its new content, never a part. On failure (a full disk) no temporary file is left and the
-    OSError names `path`."""
+@contextlib.contextmanager
+def replacing(path: Path, tmp_suffix: str = ".tmp"):
+    """Yields a temporary path beside `path` (its name + `tmp_suffix`: a writer that picks the format by
+    the suffix needs its own, e.g. ".tmp.mp4") and moves it onto `path` when the block ends, so that
+    `path` holds either its old or its new content, never a part. On failure (a full disk) no temporary
+    file is left and the OSError names `path`."""
     path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
+    tmp = path.with_name(path.name + tmp_suffix)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with open(tmp, "wb") as f:
-            f.write(data.encode() if isinstance(data, str) else data)
+        yield tmp
         os.replace(tmp, path)
     except OSError as e:
         tmp.unlink(missing_ok=True)
         raise OSError(e.errno, f"cannot write {path}: {e.strerror or e}") from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_atomic(path: Path, data: bytes | str) -> None:
+    """Writes `data` to `path` atomically (see `replacing`)."""
+    with replacing(path) as tmp, open(tmp, "wb") as f:
+        f.write(data.encode() if isinstance(data, str) else data)
 
 
 def csv_text(columns: list[str], rows: list[dict]) -> str:
