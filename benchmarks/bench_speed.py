@@ -49,7 +49,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils.runs import train_in_process
+from pgg_utils.runs import latest_checkpoint, train_in_process
 
 CLEANRL_SPS = {"CartPole-v1": (3400, 4000), "Hopper-v4": (780, 780)}
 CLEANRL_SCRIPTS = {"CartPole-v1": "ppo.py", "Hopper-v4": "ppo_continuous_action.py"}
@@ -242,8 +242,7 @@ def sweep_checkpoint(given: dict[str, Path], env_id: str, module, args, tmp: str
     if env_id in given:
         return given[env_id]
     args.output_dir = tmp
-    train_in_process(module, args)
-    return max(Path(tmp).rglob("step_*.pt"))
+    return latest_checkpoint(train_in_process(module, args))
 
 
 def checkpoints_by_env(paths) -> dict[str, Path]:
