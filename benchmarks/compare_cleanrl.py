@@ -37,7 +37,6 @@ from datetime import datetime, timezone
 from operator import itemgetter
 from pathlib import Path
 
-import gymnasium as gym
 import matplotlib
 
 matplotlib.use("Agg")
@@ -50,6 +49,7 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 from pgg_utils.files import write_atomic
+from pgg_utils.paper import action_kind
 from pgg_utils.processes import die_with_parent
 from pgg_utils.stats import ALPHA, welch
 
@@ -148,16 +148,9 @@ class Plan:
 
 def is_discrete(env_id: str) -> bool:
     try:
-        with warnings.catch_warnings():  # gymnasium 1.x calls the MuJoCo v4 tasks out of date: they are the paper's
-            warnings.simplefilter("ignore", DeprecationWarning)
-            env = gym.make(env_id)
-    except (gym.error.Error, ImportError) as e:
-        raise CompareError(f"cannot make environment {env_id!r}: {e}") from None
-    space = env.action_space
-    env.close()
-    if not isinstance(space, (gym.spaces.Discrete, gym.spaces.Box)):
-        raise CompareError(f"{env_id} has a {type(space).__name__} action space; the scripts take Discrete or Box")
-    return isinstance(space, gym.spaces.Discrete)
+        return action_kind(env_id) == "discrete"
+    except ValueError as e:  # an unknown id, or an action space the scripts do not take
+        raise CompareError(str(e)) from None
 
 
 def saved_total(folder: Path) -> int | None:
