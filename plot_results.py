@@ -24,8 +24,10 @@ Writes into --output (and prints each path):
                                 cells from a MuJoCo other than 2.3.7 are marked †
   table_<kind>_ppo_sweep.*      the vanilla PPO checkpoints swept over γ (not in the paper)
   fig_<kind>_<variant>.png/pdf  the paper's figures: return against training steps, PPO solid black,
-                                one dashed viridis line per eval γ, 95% CI as band and error bars;
-                                continuous: the paper's six tasks in 2×3, "not run" where no data
+                                one dashed line per eval γ (one colour per γ in every figure), 95% CI
+                                as band and error bars; continuous: the paper's six tasks in 2×3, "not
+                                run" where no data; the dropout figure the paper's γ 1.0-1.2 only, the
+                                other swept γ in fig_continuous_pgg_drop0.1_beyond_paper
   gamma_response_<kind>.png/pdf return against eval γ at one step, one line per variant
   learning_curves.png/pdf       (--runs) episodic training return against steps, mean and CI over seeds
   best_gamma.md / .csv          the best eval γ per env, variant and step
@@ -33,8 +35,11 @@ Writes into --output (and prints each path):
                                 with stratified-bootstrap 95% CIs (scipy.stats.bootstrap)
   compare_paper.md / .csv       (--compare-paper) the agreement report: per paper cell Welch's t test
                                 on the two summaries, Holm-corrected over the cells of one table,
-                                effect sizes, CI overlap; per env a sign test; CleanRL's published PPO
-                                as a second reference; the simulated null rates of each criterion
+                                effect sizes, CI overlap and the gap its test detects 80% of the time;
+                                per env a sign test and the median relative gap with a bootstrap CI
+                                over our seeds; CleanRL's published PPO as a second reference; the
+                                simulated null rates of each criterion
+  compare_paper_tasks.csv       (--compare-paper) the per-env lines of the report's headline
   provenance.md                 (--provenance) each input CSV with the commits, MuJoCo and machine
                                 behind it, and which cells come from it
   controls.md                   when the sweeps hold several evaluation modes (--deterministic,
@@ -51,6 +56,7 @@ import json
 import math
 import os
 import sys
+import zlib
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -58,16 +64,24 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
+import matplotlib.colors
 import matplotlib.pyplot as plt
 import matplotlib.ticker
 import numpy as np
 import tyro
 from scipy import stats
 
-from pgg_utils.agreement import REFERENCE_MUJOCO, compare_with_paper, comparison_markdown, series_id, step_label
+from pgg_utils.agreement import (
+    REFERENCE_MUJOCO,
+    compare_with_paper,
+    comparison_markdown,
+    series_id,
+    step_label,
+    task_summaries,
+)
 from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.files import InputError, read_csv, write_atomic
-from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id
+from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id
 from pgg_utils.stats import mean_ci95
 
 ROOT = Path(__file__).resolve().parent
@@ -85,6 +99,16 @@ RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "Inver
 NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 MARKERS = "osD^vPX*hp<>"
 MANIFEST = "outputs.txt"
+# The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
+# variants fixed, any other a fixed colour of its name) and one per eval γ (viridis by the γ's place in
+# its table's grid of the paper, PAPER_GAMMAS; between grid points by log γ, past its ends the end colours).
+VARIANT_COLOURS = {"ppo": "black", "pgg_g1.1": "C1", "pgg_drop0.1": "C2"}
+OTHER_VARIANT_COLOURS = ("C0", "C3", "C4", "C5", "C6", "C8", "C9")
+GAMMA_CMAP, GAMMA_CMAP_SPAN = "viridis", (0.0, 0.9)  # the paper's: dark for γ = 1, light green for its largest γ
+# The eval γ a paper figure draws where it is fewer than its table's (its continuous dropout figure: 1.0-1.2).
+# Our figure of that variant draws the same range; the other swept γ go to fig_<kind>_<variant>_beyond_paper.
+PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}
+LINE_STYLES = ("-", "--", ":", "-.")  # several configurations of one variant in one colour
 
 
 @dataclass
@@ -181,7 +205,9 @@ def read_episodes(paths) -> list[dict]:
                 raise InputError(f"{path} is empty")
             missing = REQUIRED_COLUMNS - set(reader.fieldnames or [])
             if missing:
-                raise InputError(f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?")
+                raise InputError(
+                    f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?"
+                )
             for row in reader:
                 row["config"] = row.get("config") or row["variant"]
                 row["kind"] = kind_of(row, path)
@@ -212,8 +238,9 @@ def check_one_kind(rows: list[dict]) -> None:
     for row in rows:
         kind, source = first.setdefault(row["env_id"], (row["kind"], row["_source"]))
         if kind != row["kind"]:
-            raise InputError(f"{row['env_id']} has {kind} actions in {source} and {row['kind']} actions in "
-                             f"{row['_source']}")
+            raise InputError(
+                f"{row['env_id']} has {kind} actions in {source} and {row['kind']} actions in {row['_source']}"
+            )
 
 
 def configuration(row: dict) -> tuple:
@@ -241,8 +268,10 @@ def check_not_pooled(rows: list[dict]) -> None:
         if key in episodes:
             first = episodes[key]
             where = f"both {first} and {source}" if first != source else f"{source} twice"
-            raise InputError(f"episode {episode} of run {run} at step {row['step']}, γ {row['eval_guidance']} "
-                             f"appears in {where}; pass each sweep once")
+            raise InputError(
+                f"episode {episode} of run {run} at step {row['step']}, γ {row['eval_guidance']} "
+                f"appears in {where}; pass each sweep once"
+            )
         episodes[key] = source
 
 
@@ -310,8 +339,17 @@ def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
             "mean": mean, "ci95": half, "sd": float(np.std(seed_means, ddof=1)) if len(seed_means) > 1 else math.nan,
             "seed_means": ";".join(f"{m:.4f}" for m in seed_means), "seeds": sorted(per_seed[key]),
             "mujoco": mujoco_of(env, config, sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
+            **code_of(sources[key[:5]], provenance),
         })  # fmt: skip
     return out
+
+
+def code_of(sources, provenance: dict | None) -> dict:
+    """`code` (the revision of the training code behind a cell's runs) and `code_date` (its last commit's
+    date, which orders revisions), as the provenance of its CSVs records them; "" where it does not."""
+    entries = [provenance_entry(provenance, s) for s in sources] if provenance else []
+    dates = {e.get("code_date", "") for e in entries} - {""}
+    return {"code": "/".join(sorted({e.get("code", "") for e in entries} - {""})), "code_date": min(dates, default="")}
 
 
 def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
@@ -342,7 +380,8 @@ def ordered_series(summary, variant: str | None = None) -> list[tuple[str, str]]
 
 def read_provenance(path: str | None) -> dict:
     """{resolved CSV path: row} from a CSV with columns csv (relative to the repository), commits,
-    mujoco, machine and optional notes."""
+    mujoco, machine, and optional code (the training code's revision), code_date (its commit's date, by
+    which figures tell older code) and notes."""
     if path is None:
         return {}
     rows = read_csv(path)
@@ -367,14 +406,15 @@ def provenance_markdown(episodes: list[dict], provenance: dict) -> str:
     lines = ["# Provenance", "", ("Every cell of the tables and figures beside this file comes from one of these CSVs "
                                   "(committed in this repository). `commits`: the commits that wrote the CSV "
                                   "(`git log --format=%h -- CSV`, newest first)."), "",
-             "| CSV | envs | configs | seeds | evaluation | episodes | commits | MuJoCo | machine | notes |",
-             "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+             ("| CSV | envs | configs | seeds | evaluation | episodes | commits | MuJoCo | machine | training code "
+              "| notes |"), "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for source, e in sorted(per_source.items(), key=lambda kv: relative(kv[0])):
         p = provenance_entry(provenance, source)
         seeds = sorted(e["seeds"])
         lines.append(f"| `{relative(source)}` | {', '.join(sorted(e['envs']))} | {', '.join(sorted(e['configs']))} | "
                      f"{seeds[0]}–{seeds[-1]} | {', '.join(sorted(e['modes']))} | {e['rows']} | {p.get('commits', '?')} | "
-                     f"{p.get('mujoco', '?') or '–'} | {p.get('machine', '?')} | {p.get('notes', '')} |")  # fmt: skip
+                     f"{p.get('mujoco', '?') or '–'} | {p.get('machine', '?')} | {p.get('code', '?')} | "
+                     f"{p.get('notes', '')} |")  # fmt: skip
     return "\n".join(lines) + "\n"
 
 
@@ -395,7 +435,9 @@ def controls_table(summary_all: list[dict]) -> str:
     modes = sorted({(r["policy"], r["null_branch"]) for r in summary_all})
     by_cell = defaultdict(dict)
     for r in summary_all:
-        by_cell[(r["env_id"], series_id(r["variant"], r["series"]), r["step"], r["eval_guidance"])][(r["policy"], r["null_branch"])] = r
+        by_cell[(r["env_id"], series_id(r["variant"], r["series"]), r["step"], r["eval_guidance"])][
+            (r["policy"], r["null_branch"])
+        ] = r
     lines = ["| env | variant | step | eval γ | " + " | ".join(f"{p}, {n} null" for p, n in modes) + " |",
              "|---|---|---|---|" + "---|" * len(modes)]  # fmt: skip
     for (env, variant, step, gamma), cells in sorted(by_cell.items()):
@@ -448,7 +490,11 @@ def table_rows(summary: list[dict], envs: list[str], ppo_sweep: bool, latex: boo
                 if series:
                     yield ("row", label("ppo", series), None)
                 for gamma in sorted(gammas_of[("ppo", series)]):
-                    yield ("row", gamma_label(gamma, latex), [fmt_cell(cells.get((e, "ppo", series, step, gamma)), latex) for e in envs])
+                    yield (
+                        "row",
+                        gamma_label(gamma, latex),
+                        [fmt_cell(cells.get((e, "ppo", series, step, gamma)), latex) for e in envs],
+                    )
             continue
         for _, series in ppo_series:
             if any((e, "ppo", series, step, 1.0) in cells for e in envs):
@@ -630,17 +676,54 @@ def seeds_label(rows) -> str:
     return f"{text} seed" + ("" if text == "1" else "s")
 
 
-def panel_title(env: str, rows) -> str:
-    """`env (n seeds, MuJoCo v)`, naming the variants run on another MuJoCo where the others were not."""
+def panel_notes(rows, sep: str = " ") -> tuple[str, str]:
+    """(`n seeds, MuJoCo v`, `PPO: older code (rev)`): what a panel's title says of its cells. The
+    variants run on another MuJoCo where the others were not are named; so are those whose training
+    code (provenance.csv's code and code_date) is older than the newest in the panel ("" if none),
+    `sep` before the revision."""
     extra = [seeds_label(rows)]
     other = [r for r in rows if other_mujoco(r)]
     if other:
         versions = f"MuJoCo {', '.join(sorted({r['mujoco'] for r in other}))}"
         if len(other) < len(rows):
-            variants = sorted({r["variant"] for r in other}, key=lambda v: (variant_rank(v), v))
-            versions = f"{', '.join(paper_name(v) for v in variants)} on {versions}"
+            versions = f"{variant_names(other)} on {versions}"
         extra.append(versions)
-    return f"{env} ({', '.join(extra)})"
+    newest = max((r.get("code_date", "") for r in rows), default="")
+    older = [r for r in rows if r.get("code_date") and r["code_date"] < newest]
+    revisions = ", ".join(sorted({r["code"] for r in older}))
+    return ", ".join(extra), (f"{variant_names(older, short=True)}: older code{sep}({revisions})" if older else "")
+
+
+def variant_names(rows, short: bool = False) -> str:
+    """The paper's names of the rows' variants, in its order; `short` without "PGG, " (for panel titles)."""
+    names = [paper_name(v) for v in sorted({r["variant"] for r in rows}, key=lambda v: (variant_rank(v), v))]
+    return ", ".join(name.removeprefix("PGG, ") if short else name for name in names)
+
+
+def panel_title(env: str, rows) -> str:
+    """`env (n seeds, MuJoCo v)`, and on a second line the variants of older training code, if any."""
+    extra, code = panel_notes(rows)
+    return f"{env} ({extra})" + (f"\n{code}" if code else "")
+
+
+def variant_colour(variant: str) -> str:
+    """The colour of a training variant in every figure (VARIANT_COLOURS; any other by a hash of its name)."""
+    if variant in VARIANT_COLOURS:
+        return VARIANT_COLOURS[variant]
+    return OTHER_VARIANT_COLOURS[zlib.crc32(variant.encode()) % len(OTHER_VARIANT_COLOURS)]
+
+
+def gamma_marker(gamma: float, kind: str) -> str:
+    """The marker of an eval γ in every figure of its table: one per γ of the paper's grid, another for the rest."""
+    grid = PAPER_GAMMAS[kind]
+    return MARKERS[grid.index(gamma)] if gamma in grid else MARKERS[len(grid)]
+
+
+def gamma_colour(gamma: float, kind: str) -> str:
+    """The colour of an eval γ in every figure of its table: its place in the paper's γ grid of the kind."""
+    grid = np.log(PAPER_GAMMAS[kind])
+    place = np.interp(math.log(max(gamma, 1e-12)), grid, np.linspace(*GAMMA_CMAP_SPAN, len(grid)))
+    return matplotlib.colors.to_hex(plt.get_cmap(GAMMA_CMAP)(place))
 
 
 def few_seeds(rows) -> bool:
@@ -662,7 +745,9 @@ def legend_right(fig, entries: list, title: str) -> None:
             handles.append(handle)
             labels.append(label)
     if handles:
-        fig.legend(handles, labels, loc="outside right center", fontsize=7, frameon=False, title=title, title_fontsize=7)
+        fig.legend(
+            handles, labels, loc="outside right center", fontsize=7, frameon=False, title=title, title_fontsize=7
+        )
 
 
 def figure_layout(kind: str, envs: list[str]) -> tuple[list[str], int | None]:
@@ -673,18 +758,28 @@ def figure_layout(kind: str, envs: list[str]) -> tuple[list[str], int | None]:
     return list(envs), None
 
 
-def figure_for_variant(summary, envs, variant, layout: list[str] | None = None, cols: int | None = None):
+def figure_for_variant(
+    summary,
+    envs,
+    variant,
+    layout: list[str] | None = None,
+    cols: int | None = None,
+    gammas=None,
+    title: str | None = None,
+):
     """The paper's figure: return against training steps per env; PPO solid black (eval γ=1), one
-    dashed line per eval γ of `variant`, viridis from low to high γ, each with its own marker and a
-    small sideways offset. Envs of `layout` without data are empty panels labelled "not run"."""
+    dashed line per eval γ of `variant` (those in `gammas`, default all), each in its γ's colour and
+    marker and with a small sideways offset. Envs of `layout` without data are empty panels labelled
+    "not run". `title`: the figure's, where it is not the variant's whole figure."""
     layout = layout or list(envs)
     cells = cell_index(summary)
+    kind = summary[0]["kind"] if summary else "discrete"
     ppo_series = [s for _, s in ordered_series(summary, "ppo")]
     own_series = [s for _, s in ordered_series(summary, variant)] if variant != "ppo" else ppo_series
-    gammas = sorted({float(r["eval_guidance"]) for r in summary if r["variant"] == variant})
+    swept = {float(r["eval_guidance"]) for r in summary if r["variant"] == variant}
+    gammas = sorted(swept if gammas is None else swept & set(gammas))
     if variant == "ppo":
         gammas = [g for g in gammas if g != 1.0]  # γ = 1 is the black PPO line itself
-    colours = plt.get_cmap("viridis")(np.linspace(0, 0.9, max(len(gammas), 1)))
     styles = ["--", ":", "-.", (0, (5, 1, 1, 1))]
     fig, axes = panels(len(layout), cols)
     entries, any_clipped = [], False
@@ -707,15 +802,20 @@ def figure_for_variant(summary, envs, variant, layout: list[str] | None = None, 
                 drawn.append(data)
                 entries.append(((0, i, 0), label, line))
         for j, series in enumerate(own_series):
-            for k, (gamma, colour) in enumerate(zip(gammas, colours)):
-                points = [(s, cells[(env, variant, series, s, gamma)]) for s in steps if (env, variant, series, s, gamma) in cells]
+            for k, gamma in enumerate(gammas):
+                points = [
+                    (s, cells[(env, variant, series, s, gamma)])
+                    for s in steps
+                    if (env, variant, series, s, gamma) in cells
+                ]
                 if not points:
                     continue
                 label = f"γ = {gamma:g}" + (f" [{series}]" if series else "")
                 line, data = plot_series(ax, dodge([p[0] for p in points], k, len(gammas), spacing), [p[1] for p in points],
-                                         errorbars=not few, band_alpha=0.04 if few else 0.08, color=colour,
-                                         linestyle=styles[j % len(styles)], marker=MARKERS[k % len(MARKERS)],
-                                         markersize=3, linewidth=1.2, label=label)  # fmt: skip
+                                         errorbars=not few, band_alpha=0.04 if few else 0.08,
+                                         color=gamma_colour(gamma, kind), marker=gamma_marker(gamma, kind),
+                                         linestyle=styles[j % len(styles)], markersize=3, linewidth=1.2,
+                                         label=label)  # fmt: skip
                 drawn.append(data)
                 entries.append(((1, j, -gamma), label, line))  # the paper's legend: highest γ first
         any_clipped |= set_y_range(ax, env, drawn, few)
@@ -723,13 +823,20 @@ def figure_for_variant(summary, envs, variant, layout: list[str] | None = None, 
     if any_clipped:
         entries.append(((2, 0, 0), clipped_handle().get_label(), clipped_handle()))
     name = paper_name(variant)
-    what = "PPO checkpoints evaluated at each guidance γ (not in the paper)" if variant == "ppo" else f"{name}: evaluated at each guidance γ"
-    fig.suptitle(what, fontsize=10)
+    what = (
+        "PPO checkpoints evaluated at each guidance γ (not in the paper)"
+        if variant == "ppo"
+        else f"{name}: evaluated at each guidance γ"
+    )
+    fig.suptitle(title or what, fontsize=10)
     legend_right(fig, entries, "mean ± 95% CI over seeds")
     return fig
 
 
 def gamma_response(summary, envs, step):
+    """Return against eval γ at one step (default: each env's last), one line per variant in its colour
+    and marker (several configurations of one variant by line style), the y-axis within the task's
+    possible return like every figure (set_y_range)."""
     fig, axes = panels(len(envs))
     entries, any_clipped = [], False
     for ax, env in zip(axes, envs):
@@ -737,14 +844,16 @@ def gamma_response(summary, envs, step):
         at = step if step is not None else max(int(r["step"]) for r in env_rows)
         few = few_seeds(env_rows)
         drawn = []
-        for i, (variant, series) in enumerate(ordered_series(env_rows)):
+        for variant, series in ordered_series(env_rows):
             points = sorted((r for r in env_rows if r["variant"] == variant and r["series"] == series and int(r["step"]) == at),
                             key=lambda r: float(r["eval_guidance"]))  # fmt: skip
             if points:
                 label = series_name(variant, series)
+                style = LINE_STYLES[[s for v, s in ordered_series(env_rows) if v == variant].index(series) % 4]
                 line, data = plot_series(ax, [float(r["eval_guidance"]) for r in points], points, errorbars=not few,
-                                         band_alpha=0.06 if few else 0.12, marker=MARKERS[i % len(MARKERS)],
-                                         markersize=3, color="black" if variant == "ppo" else f"C{i}", label=label)  # fmt: skip
+                                         band_alpha=0.06 if few else 0.12, marker=MARKERS[variant_rank(variant)],
+                                         markersize=3, color=variant_colour(variant), linestyle=style,
+                                         label=label)  # fmt: skip
                 drawn.append(data)
                 entries.append(((variant_rank(variant), variant, series), label, line))
         ax.set_xscale("log")
@@ -755,7 +864,8 @@ def gamma_response(summary, envs, step):
         if len(swept) > 6:
             plt.setp(ax.get_xticklabels(), rotation=45)
         any_clipped |= set_y_range(ax, env, drawn, few)
-        title = f"{env} at {step_label(at)} steps\n{panel_title(env, env_rows)[len(env) + 2:-1]}"
+        extra, code = panel_notes([r for r in env_rows if int(r["step"]) == at], sep="\n")
+        title = f"{env} at {step_label(at)} steps\n{extra}" + (f"\n{code}" if code else "")
         style_axis(ax, title, "eval guidance γ", "return", steps_on_x=False)
     if any_clipped:
         entries.append(((9, "", ""), clipped_handle().get_label(), clipped_handle()))
@@ -805,9 +915,9 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
     fig, axes = panels(len(envs))
     for ax, env in zip(axes, envs):
         drawn, notes = [], []
-        for i, ((curve_env, variant, label), seeds) in enumerate(sorted(curves.items(), key=lambda kv: (variant_rank(kv[0][1]), kv[0]))):
-            if curve_env != env:
-                continue
+        of_env = [((v, label), seeds) for (e, v, label), seeds in curves.items() if e == env]
+        for (variant, label), seeds in sorted(of_env, key=lambda kv: (variant_rank(kv[0][0]), kv[0])):
+            style = LINE_STYLES[[lb for (v, lb), _ in of_env if v == variant].index(label) % 4]
             edges = np.linspace(0, max(s.max() for s, _ in seeds) + 1, bins + 1)
             per_seed = np.array([[r[(s >= lo) & (s < hi)].mean() if ((s >= lo) & (s < hi)).any() else np.nan
                                   for lo, hi in itertools.pairwise(edges)] for s, r in seeds])  # fmt: skip
@@ -819,13 +929,15 @@ def learning_curves(run_paths, output, written, bins: int = 50, min_points: int 
             name = series_name(variant, label) + f" (n={len(seeds)}{'' if banded else ', no CI band'})"
             few = present.sum() < min_points
             _, data = plot_series(ax, centres[present], rows, errorbars=False, band_alpha=0.1 if len(seeds) > 2 else 0.05,
-                                  color="black" if variant == "ppo" else f"C{i}", linewidth=1,
+                                  color=variant_colour(variant), linestyle=style, linewidth=1,
                                   marker="o" if few else None, markersize=3, label=name)  # fmt: skip
             drawn.append(data)
             if few:
                 count = int(present.sum())
                 notes.append(f"{series_name(variant, label)}: only {count} point{'' if count == 1 else 's'}")
-        clipped = set_y_range(ax, env, drawn, few=min(len(seeds) for (e, _, _), seeds in curves.items() if e == env) < 3)
+        clipped = set_y_range(
+            ax, env, drawn, few=min(len(seeds) for (e, _, _), seeds in curves.items() if e == env) < 3
+        )
         style_axis(ax, env, "training steps", "episodic return", steps_on_x=True)
         handles, labels = ax.get_legend_handles_labels()
         if clipped:
@@ -877,7 +989,9 @@ def aggregate_iqm(summary) -> list[dict]:
     for r in summary:
         lo, hi = bounds[(r["env_id"], int(r["step"]))]
         seed_means = np.array([float(x) for x in r["seed_means"].split(";")])
-        groups[(series_id(r["variant"], r["series"]), int(r["step"]), float(r["eval_guidance"]))].append((seed_means - lo) / ((hi - lo) or 1.0))
+        groups[(series_id(r["variant"], r["series"]), int(r["step"]), float(r["eval_guidance"]))].append(
+            (seed_means - lo) / ((hi - lo) or 1.0)
+        )
     out = []
     for (variant, step, gamma), per_env in sorted(groups.items()):
         point = iqm(np.concatenate(per_env))
@@ -948,7 +1062,17 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
         paper_variants = set(PAPER_VARIANTS) if kind == "continuous" and args.paper_layout else set()
         variants = sorted({r["variant"] for r in rows} | paper_variants, key=lambda v: (variant_rank(v), v))
         for variant in variants:
-            save_figure(figure_for_variant(rows, envs, variant, layout, cols), output / f"fig_{kind}_{variant}", written)
+            swept = {float(r["eval_guidance"]) for r in rows if r["variant"] == variant}
+            low, high = PAPER_FIGURE_GAMMAS.get((kind, variant), (-math.inf, math.inf))
+            inside = {g for g in swept if low <= g <= high}
+            figure = figure_for_variant(rows, envs, variant, layout, cols, gammas=inside)
+            save_figure(figure, output / f"fig_{kind}_{variant}", written)
+            if swept - inside:
+                rest = sorted(swept - inside)
+                title = (f"{paper_name(variant)}: the eval γ beyond the paper's figure "
+                         f"({', '.join(f'{g:g}' for g in rest)}), γ = 1 for reference")  # fmt: skip
+                figure = figure_for_variant(rows, envs, variant, layout, cols, gammas=set(rest) | {1.0}, title=title)
+                save_figure(figure, output / f"fig_{kind}_{variant}_beyond_paper", written)
         save_figure(gamma_response(rows, envs, args.response_step), output / f"gamma_response_{kind}", written)
     best = best_gamma(summary)
     write_csv(output / "best_gamma.csv", best, written)
@@ -960,8 +1084,10 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
         learning_curves(args.runs, output, written)
     if args.compare_paper:
         comparison = compare_with_paper(summary)
+        tasks = task_summaries(comparison, summary)
         write_csv(output / "compare_paper.csv", comparison, written)
-        write(output / "compare_paper.md", comparison_markdown(comparison, summary), written)
+        write_csv(output / "compare_paper_tasks.csv", tasks, written)
+        write(output / "compare_paper.md", comparison_markdown(comparison, summary, tasks), written)
 
 
 # --- the manifest of outputs ----------------------------------------------------------------------

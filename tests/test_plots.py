@@ -12,7 +12,18 @@ from scipy import stats
 
 import plot_results as plots
 from pgg_utils.files import read_csv
-from pgg_utils.stats import hedges_g, holm, null_rates, sd_from_ci, sign_test, welch
+from pgg_utils.stats import (
+    bootstrap_coverage,
+    detectable_gap,
+    hedges_g,
+    holm,
+    median_relative_gap,
+    null_rates,
+    sd_from_ci,
+    sign_test,
+    welch,
+    welch_power,
+)
 
 # Per-seed mean returns of the synthetic sweep: (env, variant, step, eval γ) -> three seed means.
 # Two episodes per seed, at mean ± 1. With means m, m+1, m+2 the summary is (m+1) ± t(.975,2)·1/√3 = ± 2.5.
@@ -37,8 +48,9 @@ COLUMNS = ["env_id", "variant", "run", "seed", "train_guidance", "cond_dropout",
            "policy", "null_branch", "episode", "episode_seed", "return", "length"]  # fmt: skip
 
 
-def episode_rows(seed_means: dict, config: str | None = None, run_suffix: str = "", policy="sample",
-                 action_space: str | None = None) -> list[dict]:
+def episode_rows(
+    seed_means: dict, config: str | None = None, run_suffix: str = "", policy="sample", action_space: str | None = None
+) -> list[dict]:
     rows = []
     for (env, variant, step, gamma), means in seed_means.items():
         for seed, mean in enumerate(means, start=1):
@@ -155,6 +167,46 @@ def test_simulated_null_overlap_rate_is_near_certain():
     assert rates[0]["welch_reject"] < 0.06 < rates[1]["welch_reject"]
 
 
+def welch_rejections(gap, sd1, sd2, n, alpha, draws=20_000, seed=0) -> float:
+    """Monte Carlo: how often Welch's test (scipy's) rejects at `alpha` for normal samples whose means differ
+    by `gap`."""
+    rng = np.random.default_rng(seed)
+    a = rng.standard_normal((draws, n)) * sd1
+    b = rng.standard_normal((draws, n)) * sd2 + gap
+    return float((stats.ttest_ind(a, b, axis=1, equal_var=False).pvalue < alpha).mean())
+
+
+@pytest.mark.parametrize("sd1, sd2, alpha", [(1.0, 1.0, 0.05 / 270), (827.0, 65.0, 0.05 / 270), (1.0, 3.0, 0.05),
+                                             (0.0, 2.0, 0.05 / 70)])  # fmt: skip
+def test_a_gap_of_the_detectable_size_is_detected_80_percent_of_the_time(sd1, sd2, alpha):
+    # equal sds at Holm's first step over 270 cells (where the noncentral-t approximation says 80% and gives 63%),
+    # HalfCheetah's 1M PPO cell (the paper's sd 827, ours 65), unequal sds at 0.05, one side without spread
+    gap = detectable_gap(sd1, 5, sd2, 5, alpha)
+    assert welch_power(gap, sd1, 5, sd2, 5, alpha) == pytest.approx(0.8, abs=1e-6)
+    assert welch_rejections(gap, sd1, sd2, 5, alpha) == pytest.approx(0.8, abs=0.015)
+    assert welch_rejections(0.8 * gap, sd1, sd2, 5, alpha) < 0.7  # and a smaller gap is missed more often
+
+
+def test_detectable_gap_scales_with_the_spread_and_is_undefined_without_one():
+    one = detectable_gap(1.0, 5, 1.0, 5, 0.05 / 270)
+    assert 5.5 < one < 6.1  # about 6 sds with 5 seeds a side at α/270
+    assert detectable_gap(10.0, 5, 10.0, 5, 0.05 / 270) == pytest.approx(10 * one, rel=1e-6)
+    assert math.isnan(detectable_gap(0.0, 5, 0.0, 5, 0.05)) and math.isnan(detectable_gap(1.0, 1, 1.0, 5, 0.05))
+
+
+def test_median_relative_gap_resamples_seeds_per_run_set_with_the_references_fixed():
+    x = np.array([90.0, 95.0, 100.0, 105.0, 130.0])
+    two_cells = [(np.stack([x, x + 10]), np.array([100.0, 110.0]))]  # one run set: its two cells share the seed draws
+    median, low, high = median_relative_gap(two_cells, resamples=2000, seed=0)
+    draws = np.random.default_rng(0).integers(0, 5, size=(2000, 5))
+    first, second = (x[draws].mean(1) - 100) / 100, (x[draws].mean(1) + 10 - 110) / 110
+    expected_low, expected_high = np.percentile(np.median(np.stack([first, second]), axis=0), [2.5, 97.5])
+    assert median == pytest.approx(np.median([(x.mean() - 100) / 100, (x.mean() - 100) / 110]))
+    assert (low, high) == pytest.approx((expected_low, expected_high))
+    assert median_relative_gap([(np.full((3, 5), 50.0), np.array([100.0, 100.0, 100.0]))]) == (-0.5, -0.5, -0.5)
+    assert 0.78 < bootstrap_coverage(5) < 0.90  # a 5-seed percentile interval is narrow: the report says so
+
+
 def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_path):
     generate(sweep_dir, tmp_path, compare_paper=True)
     with open(tmp_path / "out" / "compare_paper.csv") as f:
@@ -172,7 +224,9 @@ def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_p
                                               equal_var=False).pvalue  # fmt: skip
         expected_p.append(1.0 if np.isnan(expected) else expected)  # 500 ± 0 vs 500 ± 1: p computed, not nan
         assert float(r["p"]) == pytest.approx(expected_p[-1], rel=1e-3, abs=1e-4)
-        assert float(r["diff_pct"]) == pytest.approx(100 * (np.mean(ours) - float(p["mean"])) / abs(float(p["mean"])), abs=1e-3)
+        assert float(r["diff_pct"]) == pytest.approx(
+            100 * (np.mean(ours) - float(p["mean"])) / abs(float(p["mean"])), abs=1e-3
+        )
     m = len(rows)  # Holm over the cells of the discrete table
     order = np.argsort(expected_p)
     holm = np.maximum.accumulate([min(1.0, (m - i) * expected_p[j]) for i, j in enumerate(order)])
@@ -181,15 +235,50 @@ def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_p
     assert {key(r) for r in rows if r["significant"] == "True"} == DISAGREEING
     assert {key(r) for r in rows if r["ci_overlap"] == "False"} == DISAGREEING
     report = (tmp_path / "out" / "compare_paper.md").read_text()
-    assert "**3 differ significantly**" in report and "Holm-corrected over these 12 cells" in report
+    assert "**3 of 12 differ significantly**" in report and "Holm-corrected over these 12 cells" in report
     assert "**CartPole-v1**: 6 cells; **2 differ significantly after Holm**" in report
     assert "99.4%" in report or "99.3%" in report or "99.5%" in report  # the simulated null overlap rate
 
 
+def test_the_report_says_what_each_test_can_see_and_pools_a_task_with_a_bootstrap(sweep_dir, tmp_path):
+    generate(sweep_dir, tmp_path, compare_paper=True)
+    rows = [r for r in read_csv(tmp_path / "out" / "compare_paper.csv") if r["reference"] == "paper"]
+    for r in rows:  # per cell: the gap found 80% of the time at Holm's first step, α/12, from the cell's two sds
+        expected = detectable_gap(float(r["our_sd"]), 3, float(r["ref_sd"]), 5, 0.05 / 12)
+        assert float(r["detectable_gap"]) == pytest.approx(expected, rel=1e-3)
+        assert float(r["detectable_gap_pct"]) == pytest.approx(100 * expected / abs(float(r["ref_mean"])), rel=1e-3)
+    tasks = {t["env_id"]: t for t in read_csv(tmp_path / "out" / "compare_paper_tasks.csv")}
+    assert set(tasks) == {"Acrobot-v1", "CartPole-v1"}
+    report = (tmp_path / "out" / "compare_paper.md").read_text()
+    assert "| env | cells | differ after Holm | gap detected 80% of the time (median) |" in report
+    assert "holds the paper's means fixed" in report
+    for env, task in tasks.items():
+        cells = [r for r in rows if r["env_id"] == env]
+        assert float(task["holm_first_alpha"]) == pytest.approx(0.05 / 12, rel=0.01)  # the CSV keeps 4 decimals
+        gaps = [float(r["detectable_gap"]) for r in cells]
+        assert float(task["detectable_gap_median"]) == pytest.approx(np.median(gaps), rel=1e-3)
+        assert float(task["rel_gap_median_pct"]) == pytest.approx(
+            np.median([float(r["diff_pct"]) for r in cells]), abs=1e-2
+        )
+        assert (
+            float(task["rel_gap_ci_low_pct"]) <= float(task["rel_gap_median_pct"]) <= float(task["rel_gap_ci_high_pct"])
+        )
+        gap = f"{float(task['rel_gap_median_pct']):+.1f}%".replace("-", "−")
+        assert (
+            f"| {env} | {len(cells)} | {task['significant']} | {float(task['detectable_gap_median']):.1f} |" in report
+        )
+        assert gap in report
+
+
 def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
-    means = {("CartPole-v1", "ppo", 500000, 1.0): [489.0, 490.0, 491.0], ("CartPole-v1", "ppo", 400000, 1.0): [480.0, 481.0, 482.0]}
+    means = {
+        ("CartPole-v1", "ppo", 500000, 1.0): [489.0, 490.0, 491.0],
+        ("CartPole-v1", "ppo", 400000, 1.0): [480.0, 481.0, 482.0],
+    }
     write_episodes(tmp_path / "episodes.csv", episode_rows(means))
-    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"), compare_paper=True))
+    plots.generate(
+        plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"), compare_paper=True)
+    )
     rows = read_csv(tmp_path / "out" / "compare_paper.csv")
     cleanrl = [r for r in rows if r["reference"] == "cleanrl"]
     assert len(cleanrl) == 1 and cleanrl[0]["step"] == "500000"
@@ -213,10 +302,18 @@ def test_two_configs_are_never_pooled(tmp_path):
     table = (tmp_path / "out" / "table_discrete.md").read_text()
     assert "| PPO [learning_rate=0.002] | 366.0 |" in table and "| PPO [learning_rate=default] | 190.0 |" in table
     fig = plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
-    labels = {line.get_label(): list(line.get_ydata()) for line in fig.axes[0].get_lines() if not line.get_label().startswith("_")}
+    labels = {
+        line.get_label(): list(line.get_ydata())
+        for line in fig.axes[0].get_lines()
+        if not line.get_label().startswith("_")
+    }
     assert labels == {}  # no PGG data: the panel says "not run" instead of drawing PPO alone
     fig = plots.figure_for_variant(summary, ["CartPole-v1"], "ppo")
-    labels = {line.get_label(): list(line.get_ydata()) for line in fig.axes[0].get_lines() if not line.get_label().startswith("_")}
+    labels = {
+        line.get_label(): list(line.get_ydata())
+        for line in fig.axes[0].get_lines()
+        if not line.get_label().startswith("_")
+    }
     assert labels == {"PPO [learning_rate=0.002] (γ = 1)": [366.0], "PPO [learning_rate=default] (γ = 1)": [190.0]}
 
 
@@ -255,7 +352,10 @@ def test_configurations_are_grouped_on_their_exact_guidance(tmp_path):
 
 
 def test_cells_from_another_mujoco_are_marked(tmp_path):
-    hopper = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0], ("Walker2d-v4", "ppo", 200000, 1.0): [800.0, 810.0, 820.0]}
+    hopper = {
+        ("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0],
+        ("Walker2d-v4", "ppo", 200000, 1.0): [800.0, 810.0, 820.0],
+    }
     rows = episode_rows(hopper)
     write_episodes(tmp_path / "here" / "episodes.csv", [r for r in rows if r["env_id"] == "Hopper-v4"])
     write_episodes(tmp_path / "there" / "episodes.csv", [r for r in rows if r["env_id"] == "Walker2d-v4"])
@@ -274,7 +374,10 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
     assert "def5678 | 3.1.6 | sixteen cores" in provenance_md and "abc1234 | 2.3.7 | two cores" in provenance_md
     assert tmp_path / "out" / "provenance.md" in written
     summary = summary_of(tmp_path / "here", tmp_path / "there", provenance=str(provenance))
-    assert plots.panel_title("Walker2d-v4", [r for r in summary if r["env_id"] == "Walker2d-v4"]) == "Walker2d-v4 (3 seeds, MuJoCo 3.1.6)"
+    assert (
+        plots.panel_title("Walker2d-v4", [r for r in summary if r["env_id"] == "Walker2d-v4"])
+        == "Walker2d-v4 (3 seeds, MuJoCo 3.1.6)"
+    )
     walker = [r for r in summary if r["env_id"] == "Walker2d-v4"]
     mixed = walker + [dict(r, variant="pgg_drop0.1", mujoco="2.3.7") for r in walker]
     assert plots.panel_title("Walker2d-v4", mixed) == "Walker2d-v4 (3 seeds, PPO on MuJoCo 3.1.6)"
@@ -287,8 +390,9 @@ def test_plot_results_imports_neither_torch_nor_the_training_scripts():
     """Tables from committed CSVs, and a usage error, need no torch (seconds to import) and no training code."""
     code = ("import plot_results, sys; assert 'torch' not in sys.modules; "
             "assert not {'eval_gamma_sweep', 'ppo_pgg_discrete', 'ppo_pgg_continuous'} & set(sys.modules)")  # fmt: skip
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT,
-                          check=False)
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT, check=False
+    )
     assert proc.returncode == 0, proc.stderr
 
 
@@ -303,8 +407,9 @@ def test_an_env_is_tabled_by_its_action_space_not_its_name(tmp_path, env, action
     write_episodes(tmp_path / "episodes.csv", rows)
     assert {(r["env_id"], r["kind"]) for r in summary_of(tmp_path / "episodes.csv")} == {
         (env, "continuous"), ("CartPole-v1", "discrete")}  # fmt: skip
-    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"),
-                              paper_layout=False))
+    plots.generate(
+        plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out"), paper_layout=False)
+    )
     assert (tmp_path / "out" / "table_continuous.md").read_text().splitlines()[2] == f"| Method | {env} |"
     assert (tmp_path / "out" / "table_discrete.md").read_text().splitlines()[2] == "| Method | CartPole-v1 |"
 
@@ -378,7 +483,10 @@ def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
 
 
 def test_continuous_figures_have_the_paper_layout_with_not_run_panels(tmp_path):
-    means = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0], ("Hopper-v4", "pgg_g1.1", 200000, 1.0): [900.0, 950.0, 1000.0]}
+    means = {
+        ("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0],
+        ("Hopper-v4", "pgg_g1.1", 200000, 1.0): [900.0, 950.0, 1000.0],
+    }
     write_episodes(tmp_path / "episodes.csv", episode_rows(means))
     written = plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
     names = {p.name for p in written}
@@ -412,6 +520,77 @@ def test_cartpole_axis_is_clipped_to_its_returns_and_clipped_bands_are_marked(tm
         assert "CI runs past the axis (clipped)" in legend_labels(fig)
 
 
+def line_style(fig, label: str, ax: int = 0) -> tuple[str, str]:
+    """(colour as hex, marker) of the line with this label."""
+    line = next(line for line in fig.axes[ax].get_lines() if line.get_label() == label)
+    return matplotlib.colors.to_hex(line.get_color()), line.get_marker()
+
+
+def test_one_gamma_and_one_variant_have_one_colour_in_every_figure(tmp_path):
+    means = {("CartPole-v1", variant, step, gamma): [100.0 * gamma, 101.0 * gamma, 102.0 * gamma]
+             for variant in ("ppo", "pgg_g1.1") for step in (100000, 200000) for gamma in (1.0, 2.0, 5.0)}  # fmt: skip
+    write_episodes(tmp_path / "both.csv", episode_rows(means))
+    write_episodes(tmp_path / "guided.csv", episode_rows({k: v for k, v in means.items() if k[1] == "pgg_g1.1"}))
+    summary = summary_of(tmp_path / "both.csv")
+    ppo_fig = plots.figure_for_variant(summary, ["CartPole-v1"], "ppo")
+    pgg_fig = plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
+    for gamma in (2.0, 5.0):  # the PPO figure has no γ = 1 line: its first γ must not take γ = 1's colour
+        expected = (plots.gamma_colour(gamma, "discrete"), plots.gamma_marker(gamma, "discrete"))
+        assert line_style(ppo_fig, f"γ = {gamma:g}") == line_style(pgg_fig, f"γ = {gamma:g}") == expected
+    assert len({line_style(pgg_fig, f"γ = {g}")[0] for g in (1, 2, 5)}) == 3
+    assert plots.gamma_colour(1.05, "continuous") != plots.gamma_colour(1.0, "continuous")
+    beside_ppo = plots.gamma_response(summary, ["CartPole-v1"], step=None)
+    alone = plots.gamma_response(summary_of(tmp_path / "guided.csv"), ["CartPole-v1"], step=None)
+    name = "PGG, γ_train = 1.1"
+    assert line_style(beside_ppo, name) == line_style(alone, name)  # not a colour by position in the legend
+    assert line_style(beside_ppo, name)[0] == matplotlib.colors.to_hex(plots.variant_colour("pgg_g1.1"))
+    assert line_style(beside_ppo, "PPO")[0] == "#000000"
+    matplotlib.pyplot.close("all")
+
+
+def test_the_continuous_dropout_figure_draws_the_papers_gammas_and_the_rest_apart(tmp_path, monkeypatch):
+    means = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0]}
+    means |= {("Hopper-v4", "pgg_drop0.1", 200000, g): [900.0 + g, 950.0, 1000.0] for g in (1.0, 1.2, 1.5)}
+    rows = episode_rows(means)
+    for row in rows:
+        row["cond_dropout"], row["train_guidance"] = (0.1 if row["variant"] == "pgg_drop0.1" else 0.0), 1.0
+    write_episodes(tmp_path / "episodes.csv", rows)
+    figures = {}
+    monkeypatch.setattr(plots, "save_figure", lambda fig, stem, written: figures.setdefault(stem.name, fig))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
+    labels = lambda fig: [line.get_label() for line in fig.axes[1].get_lines() if not line.get_label().startswith("_")]
+    assert labels(figures["fig_continuous_pgg_drop0.1"]) == ["PPO", "γ = 1", "γ = 1.2"]  # the paper's 1.0-1.2
+    beyond = figures["fig_continuous_pgg_drop0.1_beyond_paper"]
+    assert (
+        labels(beyond) == ["PPO", "γ = 1", "γ = 1.5"]
+        and "beyond the paper's figure (1.5)" in beyond._suptitle.get_text()
+    )
+    assert line_style(beyond, "γ = 1", ax=1) == line_style(figures["fig_continuous_pgg_drop0.1"], "γ = 1", ax=1)
+    assert "fig_continuous_ppo_beyond_paper" not in figures  # only where the paper's figure draws fewer γ
+    matplotlib.pyplot.close("all")
+
+
+def test_a_line_from_older_training_code_is_marked_in_its_panel(tmp_path):
+    old = {("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0]}
+    new = {("Hopper-v4", "pgg_g1.1", 200000, 1.0): [900.0, 950.0, 1000.0]}
+    write_episodes(tmp_path / "old" / "episodes.csv", episode_rows(old))
+    write_episodes(tmp_path / "new" / "episodes.csv", episode_rows(new))
+    provenance = tmp_path / "provenance.csv"
+    header = "csv,commits,mujoco,machine,code,code_date,notes\n"
+    old_row = f"{tmp_path / 'old' / 'episodes.csv'},abc1234,2.3.7,two cores,aaa0001,2026-11-22 09:22,\n"
+    new_row = f"{tmp_path / 'new' / 'episodes.csv'},def5678,2.3.7,two cores,bbb0002,2026-11-29 03:53,\n"
+    provenance.write_text(header + old_row + new_row)
+    summary = summary_of(tmp_path / "old", tmp_path / "new", provenance=str(provenance))
+    fig = plots.figure_for_variant(summary, ["Hopper-v4"], "pgg_g1.1")
+    assert fig.axes[0].get_title() == "Hopper-v4 (3 seeds)\nPPO: older code (aaa0001)"
+    assert plots.figure_for_variant(summary, ["Hopper-v4"], "ppo").axes[0].get_title() == "Hopper-v4 (3 seeds)"
+    response = plots.gamma_response(summary, ["Hopper-v4"], step=None).axes[0].get_title()
+    assert response == "Hopper-v4 at 200k steps\n3 seeds\nPPO: older code\n(aaa0001)"
+    same = summary_of(tmp_path / "old", tmp_path / "new")  # no provenance: nothing to mark
+    assert plots.figure_for_variant(same, ["Hopper-v4"], "pgg_g1.1").axes[0].get_title() == "Hopper-v4 (3 seeds)"
+    matplotlib.pyplot.close("all")
+
+
 def test_gamma_response_labels_exactly_the_swept_gammas(sweep_dir):
     fig = plots.gamma_response(summary_of(sweep_dir), ["CartPole-v1"], step=None)
     fig.canvas.draw()
@@ -428,7 +607,9 @@ def test_learning_curves_draw_few_points_and_say_so(tmp_path):
     for seed in (1, 2):
         run = tmp_path / "runs" / f"CartPole-v1__pgg_g1.1__s{seed}"
         run.mkdir(parents=True)
-        (run / "args.json").write_text(f'{{"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": {seed}}}')
+        (run / "args.json").write_text(
+            f'{{"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": {seed}}}'
+        )
         writer = SummaryWriter(str(run))
         for step, value in ((512, 20.0 + seed), (1024, 40.0 + seed)):  # episodes logged at two steps only
             writer.add_scalar("charts/episodic_return", value, step)
@@ -444,6 +625,7 @@ def test_learning_curves_draw_few_points_and_say_so(tmp_path):
     ax = captured["fig"].axes[0]
     line = next(line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)")
     assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
+    assert line.get_color() == plots.variant_colour("pgg_g1.1")  # the variant's colour in every figure
     assert any("too few points" in t.get_text() and "only 2 points" in t.get_text() for t in ax.texts)
     assert (tmp_path / "out" / "learning_curves.png").exists()
 
@@ -457,7 +639,9 @@ def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
     chosen = {(r["env_id"], r["variant"], r["step"]): float(r["best_eval_guidance"]) for r in best}
     assert chosen[("CartPole-v1", "pgg_g1.1", "100000")] == 1.0 and chosen[("Acrobot-v1", "pgg_g1.1", "100000")] == 2.0
     aggregate = read_csv(tmp_path / "out" / "aggregate_iqm.csv")
-    row = next(r for r in aggregate if r["variant"] == "pgg_g1.1" and r["step"] == "200000" and r["eval_guidance"] == "2.0")
+    row = next(
+        r for r in aggregate if r["variant"] == "pgg_g1.1" and r["step"] == "200000" and r["eval_guidance"] == "2.0"
+    )
     assert float(row["iqm"]) == pytest.approx(1.0, abs=0.02)  # best cell in both envs at 200k
     assert float(row["ci_low"]) <= float(row["iqm"]) <= float(row["ci_high"])
 
@@ -479,7 +663,10 @@ def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
     assert table[0] == "| env | variant | step | eval γ | sample, learned null | sample, uniform null |"
     assert table[2:] == [f"| CartPole-v1 | ppo | 100k | 1 | 271.0 ± {HALF_WIDTH:.1f} | 281.0 ± {HALF_WIDTH:.1f} |"]
     # the main tables still report the sampled, learned-null mode only
-    assert f"| PPO | -200.0 ± {HALF_WIDTH:.1f} | 271.0 ± {HALF_WIDTH:.1f} |" in (tmp_path / "out" / "table_discrete.md").read_text()
+    assert (
+        f"| PPO | -200.0 ± {HALF_WIDTH:.1f} | 271.0 ± {HALF_WIDTH:.1f} |"
+        in (tmp_path / "out" / "table_discrete.md").read_text()
+    )
 
 
 # --- errors: one line, up front -------------------------------------------------------------------
@@ -535,7 +722,9 @@ def test_invalid_choices_are_rejected_up_front(sweep_dir, tmp_path):
     with pytest.raises(plots.InputError, match="--policy must be sample or deterministic"):
         plots.validate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), policy="greedy"))
     with pytest.raises(plots.InputError, match="--provenance: no such file"):
-        plots.validate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), provenance=str(tmp_path / "x.csv")))
+        plots.validate(
+            plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "o"), provenance=str(tmp_path / "x.csv"))
+        )
 
 
 def test_learning_curves_never_count_one_seed_twice(tmp_path):
@@ -559,7 +748,9 @@ sys.path.insert(0, str(ROOT / "data"))
 import read_dropout_figure as reader
 
 
-@pytest.mark.skipif(not PAPER_DROPOUT_FIGURE.is_file(), reason="the paper's figures are in ../shared/paper, not in the repository")
+@pytest.mark.skipif(
+    not PAPER_DROPOUT_FIGURE.is_file(), reason="the paper's figures are in ../shared/paper, not in the repository"
+)
 def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
     # The figure's PPO markers are the paper's PPO table at 200k and 1M: the pixel-to-return calibration
     # must give those numbers back, to within 1% of each panel's y range.
@@ -575,7 +766,9 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
             continue  # a PPO marker under a dropout marker of the same value is not read
         _, (top, bottom), ((y1, v1), (y2, v2)) = reader.PANELS[row["env_id"]]
         y_range = abs(v2 - v1) / abs(y2 - y1) * (bottom - top)
-        assert float(row["paper_figure_mean"]) == pytest.approx(table[(row["env_id"], int(row["step"]))], abs=0.01 * y_range)
+        assert float(row["paper_figure_mean"]) == pytest.approx(
+            table[(row["env_id"], int(row["step"]))], abs=0.01 * y_range
+        )
         checked += 1
     assert checked >= 8
     with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
@@ -627,11 +820,15 @@ def test_two_sweeps_are_compared_cell_by_cell(tmp_path):
     expected_p = stats.ttest_ind([273, 274, 276], [270, 271, 272], equal_var=False).pvalue
     assert moderate["p"] == pytest.approx(expected_p, rel=1e-6) and 0.01 < expected_p < 0.05
     p_values = sorted(r["p"] for r in rows)
-    assert moderate["p_holm"] == pytest.approx(max(6 * p_values[0], 5 * expected_p)) and moderate["significant"] == "False"
+    assert (
+        moderate["p_holm"] == pytest.approx(max(6 * p_values[0], 5 * expected_p)) and moderate["significant"] == "False"
+    )
     unmoved = [r for r in by_cell.values() if r is not moved and r is not moderate]
     assert len(unmoved) == 4 and all(r["diff"] == 0 and r["significant"] == "False" for r in unmoved)
     text = compare_sweeps.report(rows, ("b", "a"), ("b.csv", "a.csv"), (0, 6))
-    assert "6 cells in both; **1 differ significantly**" in text and "(6 of its cells not in the other, left out)" in text
+    assert (
+        "6 cells in both; **1 differ significantly**" in text and "(6 of its cells not in the other, left out)" in text
+    )
     assert "| CartPole-v1 | PPO | 2 | 1 | 2 | 2 / 0 (p = 0.500) |" in text
     assert "| 200k: 401.0 ± 2.5 vs 301.0 ± 2.5 (p < 0.001) |" in text  # the final step of the grid, eval γ 1
 
@@ -640,13 +837,21 @@ def test_compare_sweeps_refuses_two_configurations(tmp_path):
     write_episodes(tmp_path / "a.csv", episode_rows(SEED_MEANS, config="learning_rate=0.1"))
     write_episodes(tmp_path / "b.csv", episode_rows(SEED_MEANS, config="mujoco=3.1.6"))
     with pytest.raises(plots.InputError, match=r"'(\S+) learning_rate=0.1' in one sweep and '\1 mujoco=3.1.6'"):
-        compare_sweeps.compare(compare_sweeps.cells(str(tmp_path / "a.csv")), compare_sweeps.cells(str(tmp_path / "b.csv")), "b")
+        compare_sweeps.compare(
+            compare_sweeps.cells(str(tmp_path / "a.csv")), compare_sweeps.cells(str(tmp_path / "b.csv")), "b"
+        )
 
 
 def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
-    write_episodes(tmp_path / "cartpole.csv", episode_rows({k: v for k, v in SEED_MEANS.items() if k[0] == "CartPole-v1"}))
-    write_episodes(tmp_path / "acrobot.csv", episode_rows({k: v for k, v in SEED_MEANS.items() if k[0] == "Acrobot-v1"}))
-    two_configs = episode_rows(SEED_MEANS, config="learning_rate=0.1") + episode_rows(SEED_MEANS, config="learning_rate=0.2", run_suffix="b")
+    write_episodes(
+        tmp_path / "cartpole.csv", episode_rows({k: v for k, v in SEED_MEANS.items() if k[0] == "CartPole-v1"})
+    )
+    write_episodes(
+        tmp_path / "acrobot.csv", episode_rows({k: v for k, v in SEED_MEANS.items() if k[0] == "Acrobot-v1"})
+    )
+    two_configs = episode_rows(SEED_MEANS, config="learning_rate=0.1") + episode_rows(
+        SEED_MEANS, config="learning_rate=0.2", run_suffix="b"
+    )
     write_episodes(tmp_path / "two_configs.csv", two_configs)
     for pair, message in [(("cartpole.csv", "acrobot.csv"), "no cell (env, variant, step, eval γ) in common"),
                           (("two_configs.csv", "cartpole.csv"), "2 configurations of ppo on Acrobot-v1"),
