@@ -63,6 +63,7 @@ from pgg_utils.files import InputError, LockedError, lock_directory, read_csv, w
 from pgg_utils.paper import PAPER_GAMMAS, REFERENCE_ARGS, is_mujoco, variant_id
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
+from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 from pgg_utils.video import labelled, write_video
 
@@ -515,27 +516,13 @@ def summarise(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_0
     """One row per (env, variant, config, step, γ, policy, null branch): statistics over seeds of the
     per-seed mean episodic return. A seed must be one run: InputError where two runs (the `run`
     column) give the same seed of one group, or one run gives the same episode twice."""
+    configuration = lambda row: (row["env_id"], row["variant"], config_of(row))
+    cell = lambda row: (row["step"], row["eval_guidance"], row["policy"], row["null_branch"])
+    check_one_run_per_seed(rows, configuration, cell)
     per_seed = defaultdict(lambda: defaultdict(list))
-    run_of, episodes_seen = {}, set()
     for row in rows:
         key = tuple(config_of(row) if c == "config" else str(row[c]) for c in GROUP_COLUMNS)
-        seed = str(row["seed"])
-        if "run" in row:
-            run = run_of.setdefault((key, seed), str(row["run"]))
-            if run != str(row["run"]):
-                raise InputError(
-                    f"runs {run} and {row['run']} would both count as seed {seed} of {key[0]} {key[2]!r} at step "
-                    f"{key[5]}: a seed must be one run (sweep or plot them separately)"
-                )
-            if "episode" in row:
-                episode = (key, seed, str(row["episode"]))
-                if episode in episodes_seen:
-                    raise InputError(
-                        f"episode {row['episode']} of run {run} ({key[0]} {key[2]!r}, step {key[5]}, γ {key[6]}) "
-                        "appears twice: the same cell from two sweeps?"
-                    )
-                episodes_seen.add(episode)
-        per_seed[key][seed].append(float(row["return"]))
+        per_seed[key][str(row["seed"])].append(float(row["return"]))
     out = []
     for key in sorted(per_seed, key=lambda k: (k[0], k[1], k[2], int(k[5]), float(k[6]), k[7], k[8])):
         seed_means = [float(np.mean(v)) for _, v in sorted(per_seed[key].items())]

@@ -82,6 +82,7 @@ from pgg_utils.agreement import (
 from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.files import InputError, read_csv, write_atomic
 from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id
+from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 
 ROOT = Path(__file__).resolve().parent
@@ -251,28 +252,8 @@ def configuration(row: dict) -> tuple:
 
 def check_not_pooled(rows: list[dict]) -> None:
     """A cell's seeds must be distinct runs of one configuration, and each episode must be counted once."""
-    runs = defaultdict(dict)  # (configuration, seed) -> {run: source}
-    episodes = {}
-    for row in rows:
-        run, source = row.get("run", ""), row["_source"]
-        owners = runs[(*configuration(row), row["seed"])]
-        owners.setdefault(run, source)
-        if len(owners) > 1:
-            (run_a, source_a), (run_b, source_b) = list(owners.items())[:2]
-            raise InputError(f"two runs of configuration '{row['config']}' on {row['env_id']} with seed {row['seed']}: "
-                             f"{run_a} ({source_a}) and {run_b} ({source_b}); give them different configs or sweep "
-                             "them apart")  # fmt: skip
-        episode = row.get("episode", "")
-        key = (*configuration(row), row["seed"], run, row["step"], row["eval_guidance"], row["policy"],
-               row["null_branch"], episode)  # fmt: skip
-        if key in episodes:
-            first = episodes[key]
-            where = f"both {first} and {source}" if first != source else f"{source} twice"
-            raise InputError(
-                f"episode {episode} of run {run} at step {row['step']}, γ {row['eval_guidance']} "
-                f"appears in {where}; pass each sweep once"
-            )
-        episodes[key] = source
+    cell = lambda row: (row["step"], row["eval_guidance"], row["policy"], row["null_branch"])
+    check_one_run_per_seed(rows, configuration, cell, source=lambda row: row["_source"])
 
 
 def select_mode(rows: list[dict], policy: str, null_branch: str) -> list[dict]:
