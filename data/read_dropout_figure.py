@@ -217,7 +217,7 @@ def side_by_side(paper: Image.Image, ours: Image.Image, path: Path) -> None:
     width = max(paper.width, ours.width)
     scaled = [im.resize((width, round(im.height * width / im.width))) for im in (paper, ours)]
     captions = ("The paper's figure (Qi, Tang, Zhu): continuous PPO with dropout 10%",
-                "This reproduction: 5 seeds, 50 episodes per cell (eval γ up to 1.5; the paper drew 1.0-1.2)")  # fmt: skip
+                "This reproduction: 5 seeds, 50 episodes per cell, the paper's eval γ 1.0-1.2")  # fmt: skip
     strip = 60
     canvas = Image.new("RGB", (width, sum(im.height + strip for im in scaled)), "white")
     draw, y = ImageDraw.Draw(canvas), 0
