@@ -79,9 +79,9 @@ class Args(RunArgs):
     reward_clip: float = 10.0
     """normalised rewards are clipped to [-reward_clip, reward_clip]"""
     guidance: float = 1.0  # PGG
-    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""
+    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""  # PGG
     cond_dropout: float = 0.0  # PGG
-    """probability that a sample's actor input is replaced by the null embedding during updates"""
+    """probability that a sample's actor input is replaced by the null embedding during updates"""  # PGG
     checkpoint_interval: int = 200_000
     """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
 
@@ -181,6 +181,11 @@ class RunningObsNorm(nn.Module):
     def normalise(self, raw_obs) -> np.ndarray:
         return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
 
+    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
+        """Adds `raw_obs` to the statistics and returns it normalised by them (as RolloutPolicy.observe)."""
+        update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), raw_obs)
+        return self.normalise(raw_obs)
+
     def forward(self, raw_obs) -> torch.Tensor:
         return torch.from_numpy(self.normalise(raw_obs))
 
@@ -224,8 +229,11 @@ class Agent(nn.Module):
         """Mean of pi(.|null), shape (action_dim,); one actor pass whatever the batch size."""
         return self.actor_mean(self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_mean(
-        self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None
+    def guided_mean(  # PGG
+        self,
+        obs: torch.Tensor,
+        guidance: float,
+        drop_mask: torch.Tensor | None = None,  # PGG
     ) -> torch.Tensor:  # PGG
         """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations.
         `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
@@ -496,13 +504,11 @@ def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> di
     mean_guided = agent.guided_mean(obs, guidance)  # PGG
     mean_cond = agent.actor_mean(obs)  # PGG
     inv_std = torch.exp(-agent.actor_logstd)  # PGG
+    kl = (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1)).mean().item()  # PGG
     return {  # PGG
-        "pgg/kl_guided_vs_conditional": (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1))
-        .mean()
-        .item(),  # PGG
+        "pgg/kl_guided_vs_conditional": kl,  # PGG
         "pgg/unconditional_mean_norm": agent.unconditional_mean().norm().item(),  # PGG
         "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
-        "charts/action_std_mean": agent.actor_logstd.exp().mean().item(),  # PGG
     }  # PGG
 
 
@@ -537,7 +543,7 @@ def train(args: Args, run: runs.Run) -> None:
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim, action_dim)
 
     raw_obs, _ = envs.reset(seed=args.seed)
-    next_obs = RolloutPolicy(agent, args.guidance).observe(raw_obs)  # PGG
+    next_obs = agent.obs_norm.observe(raw_obs)  # the statistics count the first observation too
     next_done = np.zeros(args.num_envs, dtype=np.float32)
     first_iteration, global_step = 1, 0
     if resumed is not None:
@@ -545,11 +551,8 @@ def train(args: Args, run: runs.Run) -> None:
         optimizer.load_state_dict(resumed["resume"]["optimizer"])
         first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
-            raw_obs, _ = envs.reset(seed=args.seed + first_iteration - 1)
-            next_obs, next_done = (
-                RolloutPolicy(agent, args.guidance).observe(raw_obs),
-                np.zeros(args.num_envs, dtype=np.float32),
-            )  # PGG
+            raw_obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
+            next_obs, next_done = agent.obs_norm.observe(raw_obs), np.zeros(args.num_envs, dtype=np.float32)
     marks = run.start_progress(
         num_iterations * batch_size,
         global_step,
@@ -569,6 +572,7 @@ def train(args: Args, run: runs.Run) -> None:
 
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
             stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))  # PGG
+            stats["charts/action_std_mean"] = agent.actor_logstd.exp().mean().item()
             stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
             stats["charts/SPS"] = run.report(global_step, iteration, stats, optimizer.param_groups[0]["params"][0])
             for key, value in stats.items():
@@ -594,8 +598,7 @@ def checkpoint_shapes(envs) -> dict:
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    if ckpt.get("format_version") not in runs.READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != ACTION_SPACE:
-        raise ValueError(f"{source} is not a continuous PGG checkpoint of format {runs.READABLE_FORMAT_VERSIONS}")
+    runs.require_kind(ckpt, ACTION_SPACE, source)
     agent = Agent(ckpt["obs_dim"], ckpt["action_dim"], ckpt["args"]["obs_clip"])
     agent.load_state_dict(ckpt["model"])
     return agent.eval()

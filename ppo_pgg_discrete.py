@@ -73,11 +73,9 @@ class Args(RunArgs):
     target_kl: float | None = None
     """stop the epochs early when the approximate KL (of the rows not dropped) exceeds this"""
     guidance: float = 1.0  # PGG
-    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""
+    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""  # PGG
     cond_dropout: float = 0.0  # PGG
-    """probability that a sample's actor input is replaced by the null embedding during updates"""
-    checkpoint_interval: int = 100_000
-    """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
+    """probability that a sample's actor input is replaced by the null embedding during updates"""  # PGG
 
 
 def make_env(env_id: str, video_dir: Path | None = None):
@@ -142,8 +140,11 @@ class Agent(nn.Module):
         """Logits of pi(.|null), shape (n_actions,); one actor pass whatever the batch size."""
         return self.actor(self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_logits(
-        self, obs: torch.Tensor, guidance: float, drop_mask: torch.Tensor | None = None
+    def guided_logits(  # PGG
+        self,
+        obs: torch.Tensor,
+        guidance: float,
+        drop_mask: torch.Tensor | None = None,  # PGG
     ) -> torch.Tensor:  # PGG
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
         replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
@@ -438,7 +439,7 @@ def train(args: Args, run: runs.Run) -> None:
         optimizer.load_state_dict(resumed["resume"]["optimizer"])
         first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
-            obs, _ = envs.reset(seed=args.seed + first_iteration - 1)
+            obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
             next_obs, next_done = obs.astype(np.float32), np.zeros(args.num_envs, dtype=np.float32)
     marks = run.start_progress(
         num_iterations * batch_size,
@@ -478,8 +479,7 @@ def checkpoint_shapes(envs) -> dict:
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    if ckpt.get("format_version") not in runs.READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != ACTION_SPACE:
-        raise ValueError(f"{source} is not a discrete PGG checkpoint of format {runs.READABLE_FORMAT_VERSIONS}")
+    runs.require_kind(ckpt, ACTION_SPACE, source)
     agent = Agent(ckpt["obs_dim"], ckpt["n_actions"])
     agent.load_state_dict(ckpt["model"])
     return agent.eval()

@@ -52,6 +52,8 @@ def write_atomic(path: Path, data: bytes | str) -> None:
     """Writes `data` to `path` atomically (see `replacing`)."""
     with replacing(path) as tmp, open(tmp, "wb") as f:
         f.write(data.encode() if isinstance(data, str) else data)
+        f.flush()
+        os.fsync(f.fileno())  # on disk before the rename: a crash leaves the old file, not an empty one
 
 
 def csv_text(columns: list[str], rows: list[dict]) -> str:

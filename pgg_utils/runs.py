@@ -1,6 +1,6 @@
-"""Run management for the training scripts, once: the run arguments and their rules, the run directory
-and its lock, the overwrite and resume rules, the checkpoint format, RNG and env-state capture, and
-`launch`, a script's `main` after parsing."""
+"""Run management for the training scripts, once: the argument check, the run directory and its lock,
+the overwrite and resume rules, the checkpoint format, RNG and env-state capture, and `launch`, a
+script's `main` after parsing."""
 
 import hashlib
 import importlib.metadata
@@ -131,7 +131,17 @@ def checkpoint_step(path: Path) -> int:
 
 
 def checkpoints_of(run_dir: Path) -> list[Path]:
-    return sorted((Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB))
+    """A run's checkpoints, in the order of their steps."""
+    return sorted((Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB), key=checkpoint_step)
+
+
+def unused_name(path: Path) -> Path:
+    """`path`, or `path.1`, `path.2`, ...: the first that does not exist."""
+    candidate, n = path, 0
+    while candidate.exists():
+        n += 1
+        candidate = path.with_name(f"{path.name}.{n}")
+    return candidate
 
 
 def latest_checkpoint(run_dir: Path) -> Path | None:
@@ -152,30 +162,30 @@ def package_versions() -> dict[str, str | None]:
 
 
 def code_revision(script: Path) -> dict:
-    """The training code of a run, the script and the pgg_utils modules it loaded: the git commit of
-    its checkout where there is one (and whether those files differ from it), and always their sha1."""
-    package = sorted(
-        Path(m.__file__).resolve()
-        for name, m in list(sys.modules.items())
-        if name.startswith("pgg_utils.") and m.__file__
-    )
-    files = [Path(script).resolve(), *package]
+    """The training code of a run, the script and this package: the git commit of its checkout where
+    there is one (and whether those files differ from it; None where git cannot tell), and always their
+    sha1. Taken when the run starts, before a checkout can move under it."""
+    files = [Path(script).resolve(), *sorted(Path(__file__).resolve().parent.glob("*.py"))]
     digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()
     commit = modified = None
     try:
-        git = ["git", "-C", str(Path(script).resolve().parent)]
-        commit = (
-            subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10).stdout.strip()
-            or None
-        )
+        git = ["git", "-C", str(files[0].parent)]
+        head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
+        commit = head.stdout.strip() if head.returncode == 0 else None
         if commit:
             status = subprocess.run(
                 [*git, "status", "--porcelain", "--", *map(str, files)], capture_output=True, text=True, timeout=10
             )
-            modified = bool(status.stdout.strip())
-    except (OSError, subprocess.SubprocessError):  # no git, or not a checkout
+            modified = bool(status.stdout.strip()) if status.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):  # no git
         commit = None
     return {"commit": commit, "modified": modified, "sha1": digest, "files": [f.name for f in files]}
+
+
+def require_kind(ckpt: dict, kind: str, source: str | Path = "checkpoint") -> None:
+    """ValueError unless `ckpt` is a checkpoint of a `kind` (discrete/continuous) script, of a readable format."""
+    if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != kind:
+        raise ValueError(f"{source} is not a {kind} PGG checkpoint of format {READABLE_FORMAT_VERSIONS}")
 
 
 def non_finite(state: dict) -> list[str]:
@@ -302,8 +312,11 @@ def env_state(envs) -> list[dict]:
             {name: pickle_free(value) for name, value in vars(layer).items() if name in ENV_STATE_ATTRIBUTES}
             for layer in wrapper_chain(env)
         ]
-        complete = hasattr(task, "state") or hasattr(task, "data")
-        states.append({"layers": layers, "rng": task.np_random.bit_generator.state, "complete": complete})
+        kinds = [type(layer).__name__ for layer in wrapper_chain(env)]
+        complete = type(task).__module__.startswith(("gymnasium.envs.classic_control", "gymnasium.envs.mujoco"))
+        states.append(
+            {"layers": layers, "layer_kinds": kinds, "rng": task.np_random.bit_generator.state, "complete": complete}
+        )
         if hasattr(task, "data"):
             # MuJoCo: every array of mjData, not only the integration state. Quantities derived from
             # the state (body positions, contact forces) lag it by one step after mj_step, and some
@@ -317,9 +330,25 @@ def env_state(envs) -> list[dict]:
     return states
 
 
+def matched_layers(chain: list, state: dict) -> list[tuple]:
+    """(wrapper, its saved attributes) by the wrappers' kinds, in order: a run resumed with another
+    --capture-video has a RecordVideo more or less in its chain. Checkpoints without the kinds match by
+    position."""
+    if "layer_kinds" not in state:
+        return list(zip(chain, state["layers"]))
+    saved = list(zip(state["layer_kinds"], state["layers"]))
+    matched = []
+    for layer in chain:
+        position = next((i for i, (kind, _) in enumerate(saved) if kind == type(layer).__name__), None)
+        if position is not None:
+            matched.append((layer, saved[position][1]))
+            saved = saved[position + 1 :]
+    return matched
+
+
 def restore_env_state(envs, states: list[dict]) -> None:
     for env, state in zip(envs.envs, states):
-        for layer, saved in zip(wrapper_chain(env), state["layers"]):
+        for layer, saved in matched_layers(list(wrapper_chain(env)), state):
             for name, value in saved.items():
                 setattr(layer, name, from_checkpoint(value))
         env.unwrapped.np_random.bit_generator.state = state["rng"]
@@ -361,6 +390,7 @@ class Run:
         self.lock = None
         self.resume_from: Path | None = None
         self.finished = False
+        self.loaded: dict | None = None  # the checkpoint check_continuable read, kept for the resume
         self.notes: list[str] = []
         self.code = None
         self.recent_returns = deque(maxlen=20)
@@ -372,6 +402,7 @@ class Run:
         """Creates and locks the run directory and writes args.json. Raises RunDirError (one line) or
         OSError (not writable)."""
         run = cls(args, kind, script)
+        run.code = code_revision(run.script)
         run.dir.mkdir(parents=True, exist_ok=True)
         try:
             run.lock = lock_directory(run.dir)
@@ -386,9 +417,19 @@ class Run:
 
     def apply_rules(self) -> None:
         args = self.args
-        latest = latest_checkpoint(self.dir)
-        if latest is not None and not args.overwrite:
-            latest = self.check_continuable(latest)
+        latest, unreadable = self.last_readable_checkpoint() if not args.overwrite else (None, [])
+        if latest is not None:
+            self.check_continuable(latest)
+        elif unreadable and not args.resume:
+            raise RunDirError(f"cannot read {unreadable[0][0]} ({unreadable[0][1]}): pass --resume to continue from the "
+                              "last readable checkpoint (it is kept, set aside), or --overwrite to start over")  # fmt: skip
+        # Every check has passed: only now is anything renamed or deleted.
+        for path, why in unreadable:
+            aside = unused_name(path.with_name(path.name + ".unreadable"))
+            os.replace(path, aside)
+            self.notes.append(f"set aside {aside.name}: {why}")
+        for stale in (self.dir / "checkpoints").glob("*.tmp"):  # a write that a kill cut short
+            stale.unlink()
         if args.resume and latest is not None and checkpoint_path(self.dir, args.total_timesteps).exists():
             self.finished = True  # nothing to train, and nothing of it to touch
             return
@@ -398,32 +439,32 @@ class Run:
             shutil.rmtree(self.dir / "videos", ignore_errors=True)
             if args.overwrite:
                 shutil.rmtree(self.dir / "checkpoints", ignore_errors=True)
-            for stale in [*checkpoints_of(self.dir), *self.dir.glob("events.out.tfevents.*")]:
+            for stale in self.dir.glob("events.out.tfevents.*"):
                 stale.unlink()
         write_atomic(self.dir / "args.json", json.dumps(asdict(args), indent=2))
 
-    def check_continuable(self, latest: Path) -> Path:
-        """Raises RunDirError unless this run may continue the one in its directory; returns the
-        checkpoint to continue from. With --resume, unreadable checkpoints at the end are set aside
-        (renamed `*.unreadable`, kept) and the last readable one is used."""
-        args = self.args
-        while True:
+    def last_readable_checkpoint(self) -> tuple[Path | None, list[tuple[Path, str]]]:
+        """(the last checkpoint that loads, [(each later one that does not, why)]). Reads, renames nothing.
+        The loaded dict is kept for the resume."""
+        unreadable = []
+        for path in reversed(checkpoints_of(self.dir)):
             try:
-                ckpt = read_checkpoint_file(latest)
-                break
+                self.loaded = read_checkpoint_file(path)
+                return path, unreadable
             except ValueError as e:
-                if not args.resume:
-                    raise RunDirError(f"cannot read {latest} ({e}): pass --resume to continue from the last readable "
-                                      "checkpoint (this one is kept, set aside), or --overwrite to start over") from None  # fmt: skip
-                aside = latest.with_name(latest.name + ".unreadable")
-                os.replace(latest, aside)
-                self.notes.append(f"set aside {aside.name}: {e}")
-                latest = latest_checkpoint(self.dir)
-                if latest is None:
-                    return None
+                unreadable.append((path, str(e)))
+        return None, unreadable
+
+    def check_continuable(self, latest: Path) -> None:
+        """Raises RunDirError unless this run may continue the one whose last readable checkpoint is
+        `latest` (with --resume, unreadable ones after it are set aside, kept, by apply_rules)."""
+        args, ckpt = self.args, self.loaded
+        if not args.resume and latest != latest_checkpoint(self.dir):
+            raise RunDirError(f"cannot read {latest_checkpoint(self.dir)}: pass --resume to continue from the last "
+                              f"readable checkpoint ({latest.name}; the others are kept, set aside), or --overwrite")  # fmt: skip
         if bad := non_finite(ckpt["model"]):
             raise RunDirError(f"{latest} holds non-finite weights ({', '.join(bad[:3])}): the run diverged, and continuing "
-                              "it would diverge again; train with other arguments, or pass --overwrite")  # fmt: skip
+                              "it would diverge again; choose another --run-name, or pass --overwrite")  # fmt: skip
         recorded = training_arguments(ckpt.get("args", {}), self.defaults())
         wanted = training_arguments(asdict(args), self.defaults())
         differing = [
@@ -441,7 +482,6 @@ class Run:
             raise RunDirError(f"{self.dir} holds {state}: {how}pass --overwrite to train it again from scratch")
         if "resume" not in ckpt:
             raise RunDirError(f"{latest} predates resumable checkpoints: pass --overwrite to start over")
-        return latest
 
     def defaults(self) -> dict:
         return asdict(type(self.args)())
@@ -470,7 +510,7 @@ class Run:
         if self.resume_from is None:
             return None
         print(f"resuming from {self.resume_from}", flush=True)
-        return read_checkpoint_file(self.resume_from)
+        return self.loaded
 
     def open_writer(self, resumed: dict | None):
         """TensorBoard's writer (and W&B's run with --track). Events written after the checkpoint by
@@ -538,8 +578,6 @@ class Run:
     def save(self, mark: int, global_step: int, model: dict, shapes: dict, resume: dict) -> None:
         """Writes the checkpoint of `mark`: self-contained, pickle-free (proven by loading it back) and
         atomic. `shapes`: the script's own fields (its action space and sizes)."""
-        if self.code is None:
-            self.code = code_revision(self.script)
         payload = {
             "format_version": CHECKPOINT_FORMAT_VERSION,
             "script": self.script.stem,
@@ -601,8 +639,8 @@ def train_in_process(script, args) -> Path:
 def launch(args, kind: str, script: str, train) -> None:
     """A training script's `main` after parsing: checks every argument before the disk is touched,
     prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
-    exit 2 for bad arguments or a run directory that must not be used, 130 for Ctrl-C, 1 for a full
-    disk or a non-finite run (its earlier checkpoints kept)."""
+    exit 2 for bad arguments or a run directory that must not be used or cannot be written, 130 for
+    Ctrl-C, 1 for a full disk during training or a non-finite run (its earlier checkpoints kept)."""
     error = argument_error(args, kind)
     run = None
     if error is None:

@@ -488,3 +488,31 @@ def test_a_full_disk_under_tensorboard_is_one_line_naming_the_run_directory(tmp_
     code, error = launch(ppo_pgg_discrete, args, capsys)
     assert code == 1 and len(error) == 1, error
     assert error[0] == f"error: cannot write in {tmp_path / runs.default_run_name(args)}: No space left on device"
+
+
+def test_a_refused_resume_sets_nothing_aside(tmp_path):
+    """Every check runs before anything is renamed: a --resume with other arguments is refused and the
+    unreadable checkpoint stays where it was."""
+    args = small_args("discrete", tmp_path)
+    run_dir = train(ppo_pgg_discrete, args)
+    last = runs.checkpoint_path(run_dir, 1536)
+    last.write_bytes(b"not a checkpoint")
+    with pytest.raises(runs.RunDirError, match="other arguments"):
+        prepare(ppo_pgg_discrete, replace(args, resume=True, learning_rate=0.002))
+    assert last.read_bytes() == b"not a checkpoint" and not list(run_dir.rglob("*.unreadable"))
+
+
+def test_resuming_with_capture_video_switched_on_still_ends_on_the_uninterrupted_runs_bits(tmp_path):
+    """RecordVideo joins the first sub-env's wrapper chain; the saved wrapper state is matched by kind."""
+    pytest.importorskip("moviepy", reason="--capture-video needs the [video] extra")
+    pytest.importorskip("pygame", reason="CartPole renders with pygame (the [video] extra)")
+    args = small_args("discrete", tmp_path, run_name="straight")
+    straight = train(ppo_pgg_discrete, args)
+    stopped = tmp_path / "stopped"
+    shutil.copytree(straight, stopped)
+    for later in (1024, 1536):
+        runs.checkpoint_path(stopped, later).unlink()
+    train(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True, capture_video=True))
+    a, b = checkpoint(straight, 1536), checkpoint(stopped, 1536)
+    assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
+    assert list((stopped / "videos").rglob("*.mp4"))
