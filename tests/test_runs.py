@@ -516,3 +516,41 @@ def test_resuming_with_capture_video_switched_on_still_ends_on_the_uninterrupted
     a, b = checkpoint(straight, 1536), checkpoint(stopped, 1536)
     assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
     assert list((stopped / "videos").rglob("*.mp4"))
+
+
+# --- both scripts --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_compile_flag_trains_through_the_compiled_loss(kind, tmp_path, compiled_calls):
+    module = SCRIPTS[kind]
+    args = small_args(kind, tmp_path, guidance=1.1, cond_dropout=0.25, total_timesteps=256, checkpoint_interval=256)
+    eager = checkpoint(train(module, args), 256)["model"]
+    compiled = checkpoint(train(module, replace(args, compile=True, run_name="compiled")), 256)["model"]
+    assert compiled_calls == [module.minibatch_loss] * (args.update_epochs * args.num_minibatches)
+    for key, value in eager.items():  # one iteration's Adam steps: the same update to float rounding
+        torch.testing.assert_close(compiled[key], value, rtol=1e-4, atol=1e-5)
+
+
+@pytest.mark.parametrize(
+    "kind,flags,message",
+    [
+        ("discrete", ["--env-id", "NoSuchEnv-v0"], "cannot make environment"),
+        ("discrete", ["--env-id", "Pendulum-v1"], "Box action space"),
+        ("discrete", ["--guidance", "nan"], "--guidance"),
+        ("discrete", ["--guidance", "-1"], "--guidance"),
+        ("discrete", ["--cond-dropout", "1.5"], "--cond-dropout"),
+        ("discrete", ["--checkpoint-interval", "0"], "--checkpoint-interval"),
+        ("discrete", ["--output-dir", "/proc/forbidden"], "cannot write the run directory"),
+        ("discrete", ["--compile"], "--compile needs a C++ compiler"),  # run with no compiler on PATH
+        ("continuous", ["--env-id", "CartPole-v1"], "Discrete action space"),
+        ("continuous", ["--env-id", "Nope-v4"], "cannot make environment"),
+        ("continuous", ["--guidance", "inf"], "--guidance"),
+        ("continuous", ["--cond-dropout", "-0.1"], "--cond-dropout"),
+        ("continuous", ["--checkpoint-interval", "-5"], "--checkpoint-interval"),
+        ("continuous", ["--compile"], "--compile needs a C++ compiler"),
+    ],
+)
+def test_bad_input_exits_with_one_line(kind, flags, message):
+    no_compiler = {key: value for key, value in os.environ.items() if key != "CXX"} | {"PATH": ""}
+    assert message in one_line_error(run_training(kind, *flags, env=no_compiler))
