@@ -666,3 +666,18 @@ def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
     monkeypatch.setattr(sweep, "run_job", evaluated.append)
     sweep.sweep(args)
     assert evaluated == [] and sweep.read_csv(tmp_path / "out" / "episodes.csv") == fresh
+
+
+def test_the_shipped_agents_load_and_sweep(tmp_path):
+    """The agents folder of results/continuous_rerun: pickle-free, without resume state, one per run and
+    step of its table, and sweepable as they are (two episodes here; the README's full re-sweep
+    reproduces the committed episodes.csv on the machine that trained them)."""
+    agents = ROOT / "results" / "continuous_rerun" / "agents"
+    files = sorted(agents.rglob("step_*.pt"))
+    assert len(files) == 2 * 2 * 5 * 5  # tasks × variants × seeds × step marks
+    agent, ckpt = sweep.load_any_checkpoint(files[0])
+    assert "resume" not in ckpt and ckpt["versions"]["mujoco"] == "2.3.7" and ckpt["code"]["commit"]
+    assert agent.null_obs.shape == (ckpt["obs_dim"],)
+    output = sweep.sweep(sweep.Args(paths=(str(files[-1]),), gammas=(1.0, 1.1), episodes=2, output=str(tmp_path / "s")))
+    rows = sweep.read_csv(output / "episodes.csv")
+    assert len(rows) == 4 and all(math.isfinite(float(r["return"])) for r in rows)
