@@ -1009,9 +1009,12 @@ def generate(args: Args) -> list[Path]:
         if written:
             write_manifest(output, previous | manifest_names(output, written))
         raise
-    for path in remove_stale(output, previous - manifest_names(output, written)):
+    # Learning curves come from --runs' TensorBoard events, which a rerun may not have: they are stale only
+    # where this run drew curves of its own.
+    kept = set() if args.runs else {name for name in previous if Path(name).stem == "learning_curves"}
+    for path in remove_stale(output, previous - kept - manifest_names(output, written)):
         print(f"note: removed {path}: the previous run into {output} wrote it, this one did not", file=sys.stderr)
-    write_manifest(output, manifest_names(output, written))
+    write_manifest(output, kept | manifest_names(output, written))
     return [*written, output / MANIFEST]
 
 

@@ -862,3 +862,16 @@ def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
         err = capsys.readouterr().err
         assert exit_info.value.code == 2
         assert err.count("\n") == 1 and err.startswith("error: ") and message in err, err
+
+
+def test_a_rerun_without_runs_keeps_the_learning_curves_a_run_with_them_drew(tmp_path):
+    """The curves come from TensorBoard events a rerun may not have (they are not committed): a rerun
+    without --runs neither redraws nor removes them."""
+    write_episodes(tmp_path / "a.csv", episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272]}))
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "learning_curves.png").write_bytes(b"drawn from --runs")
+    (out / "outputs.txt").write_text("# header\nlearning_curves.png\n")
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "a.csv"),), output=str(out)))
+    assert (out / "learning_curves.png").read_bytes() == b"drawn from --runs"
+    assert "learning_curves.png" in (out / "outputs.txt").read_text()
