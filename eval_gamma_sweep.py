@@ -59,7 +59,7 @@ import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import runs
 from pgg_utils.arguments import guidance_error
-from pgg_utils.files import InputError, LockedError, lock_directory, read_csv, write_csv_atomic
+from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, read_csv, write_csv_atomic
 from pgg_utils.paper import PAPER_GAMMAS, REFERENCE_ARGS, is_mujoco, variant_id
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
@@ -573,11 +573,7 @@ def claim_output(output: Path):
     and takes its lock (files.lock_directory: held until the returned file is closed or its holder
     dies). InputError with one line if it cannot be written or another sweep holds it."""
     try:
-        (output / "cells").mkdir(parents=True, exist_ok=True)
-        for directory in (output, output / "cells"):
-            probe = directory / f".probe.{os.getpid()}"
-            probe.write_bytes(b"")
-            probe.unlink()
+        check_writable(output, output / "cells")
         return lock_directory(output, "another sweep")
     except LockedError as e:
         raise InputError(f"{e}; wait for it to finish or choose another --output") from None

@@ -54,7 +54,6 @@ import io
 import itertools
 import json
 import math
-import os
 import sys
 import zlib
 from collections import defaultdict
@@ -71,6 +70,7 @@ import numpy as np
 import tyro
 from scipy import stats
 
+from pgg_utils import files
 from pgg_utils.agreement import (
     REFERENCE_MUJOCO,
     compare_with_paper,
@@ -80,7 +80,7 @@ from pgg_utils.agreement import (
     task_summaries,
 )
 from pgg_utils.arguments import RUN_ONLY_ARGS
-from pgg_utils.files import InputError, read_csv, write_atomic
+from pgg_utils.files import MANIFEST, InputError, read_csv, read_manifest, remove_stale, write_atomic, write_manifest
 from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id
 from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
@@ -99,7 +99,6 @@ RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "Inver
 # and the seed: never part of a configuration.
 NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 MARKERS = "osD^vPX*hp<>"
-MANIFEST = "outputs.txt"
 # The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
 # variants fixed, any other a fixed colour of its name) and one per eval γ (viridis by the γ's place in
 # its table's grid of the paper, PAPER_GAMMAS; between grid points by log γ, past its ends the end colours).
@@ -180,13 +179,7 @@ def validate(args: Args) -> None:
 def check_writable(output: Path) -> None:
     if output.exists() and not output.is_dir():
         raise InputError(f"--output {output} exists and is not a directory")
-    try:
-        output.mkdir(parents=True, exist_ok=True)
-        probe = output / f".plot_results_probe_{os.getpid()}"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as e:
-        raise InputError(f"cannot write to {output}: {e.strerror or e}") from None
+    files.check_writable(output)
 
 
 # --- reading, configurations ----------------------------------------------------------------------
@@ -1007,14 +1000,14 @@ def generate(args: Args) -> list[Path]:
         write_outputs(args, output, written)
     except BaseException:
         if written:
-            write_manifest(output, previous | manifest_names(output, written))
+            write_manifest(output, previous | manifest_names(output, written), "plot_results.py")
         raise
     # Learning curves come from --runs' TensorBoard events, which a rerun may not have: they are stale only
     # where this run drew curves of its own.
     kept = set() if args.runs else {name for name in previous if Path(name).stem == "learning_curves"}
     for path in remove_stale(output, previous - kept - manifest_names(output, written)):
         print(f"note: removed {path}: the previous run into {output} wrote it, this one did not", file=sys.stderr)
-    write_manifest(output, kept | manifest_names(output, written))
+    write_manifest(output, kept | manifest_names(output, written), "plot_results.py")
     return [*written, output / MANIFEST]
 
 
@@ -1079,34 +1072,6 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
 
 def manifest_names(output: Path, paths) -> set[str]:
     return {str(Path(path).relative_to(output)) for path in paths}
-
-
-def read_manifest(output: Path) -> set[str]:
-    """The outputs the previous run into `output` listed (paths relative to it); none without a manifest."""
-    path = output / MANIFEST
-    if not path.is_file():
-        return set()
-    return {line for line in path.read_text().splitlines() if line and not line.startswith("#")}
-
-
-def write_manifest(output: Path, names: set[str]) -> None:
-    header = "# the files plot_results.py wrote into this folder; a rerun removes those it does not write again\n"
-    write_atomic(output / MANIFEST, header + "".join(f"{name}\n" for name in sorted(names)))
-
-
-def remove_stale(output: Path, names: set[str]) -> list[Path]:
-    """Removes the listed files, and only files inside `output` (never the manifest itself, a folder or
-    a link's target, never a path that leaves `output`); returns those removed."""
-    removed = []
-    for name in sorted(names):
-        relative_path = Path(name)
-        path = output / relative_path
-        if relative_path.is_absolute() or ".." in relative_path.parts or name == MANIFEST:
-            continue
-        if path.is_file() and not path.is_symlink():
-            path.unlink()
-            removed.append(path)
-    return removed
 
 
 def main() -> None:

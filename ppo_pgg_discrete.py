@@ -441,11 +441,7 @@ def train(args: Args, run: runs.Run) -> None:
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
             obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
             next_obs, next_done = obs.astype(np.float32), np.zeros(args.num_envs, dtype=np.float32)
-    marks = run.start_progress(
-        num_iterations * batch_size,
-        global_step,
-        runs.checkpoint_marks(args.total_timesteps, args.checkpoint_interval, batch_size),
-    )
+    marks = run.start_progress(global_step, batch_size, num_iterations)
 
     try:
         for iteration in range(first_iteration, num_iterations + 1):

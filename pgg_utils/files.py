@@ -109,3 +109,49 @@ def lock_holder(directory: Path) -> str | None:
         except BlockingIOError:
             return handle.read().strip() or "unknown"
     return None
+
+
+def check_writable(*directories: Path) -> None:
+    """Creates each directory and proves it writable (a file created and removed: os.replace needs
+    that), before any work whose results would go there. InputError with one line otherwise."""
+    for directory in map(Path, directories):
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            probe = directory / f".probe.{os.getpid()}"
+            probe.write_bytes(b"")
+            probe.unlink()
+        except OSError as e:
+            raise InputError(f"cannot write to {directory}: {e.strerror or e}") from None
+
+
+# --- a folder's manifest: which of its files a command wrote, so that a rerun removes the stale ones ---
+
+MANIFEST = "outputs.txt"
+
+
+def read_manifest(folder: Path) -> set[str]:
+    """The outputs the previous run into `folder` listed (paths relative to it); none without a manifest."""
+    path = Path(folder) / MANIFEST
+    if not path.is_file():
+        return set()
+    return {line for line in path.read_text().splitlines() if line and not line.startswith("#")}
+
+
+def write_manifest(folder: Path, names: set[str], writer: str) -> None:
+    header = f"# the files {writer} wrote into this folder; a rerun removes those it does not write again\n"
+    write_atomic(Path(folder) / MANIFEST, header + "".join(f"{name}\n" for name in sorted(names)))
+
+
+def remove_stale(folder: Path, names: set[str]) -> list[Path]:
+    """Removes the listed files, and only files inside `folder` (never the manifest itself, a folder or
+    a link's target, never a path that leaves `folder`); returns those removed."""
+    removed = []
+    for name in sorted(names):
+        relative_path = Path(name)
+        path = Path(folder) / relative_path
+        if relative_path.is_absolute() or ".." in relative_path.parts or name == MANIFEST:
+            continue
+        if path.is_file() and not path.is_symlink():
+            path.unlink()
+            removed.append(path)
+    return removed

@@ -43,14 +43,13 @@ class Progress:
         return f"{done:,}/{self.total:,}{unit}  {details + '  ' if details else ''}ETA {eta}"
 
     def update(self, done: int, details: str = "") -> None:
-        line = self.line(done, details)
         if self.bar is not None:
-            self.bar.update(self.task, completed=done, line=line)
+            self.bar.update(self.task, completed=done, line=self.line(done, details))
             return
         now = time.time()
-        if now - self.last_line >= self.interval:
+        if now - self.last_line >= self.interval:  # the line is formatted only when it is printed
             self.last_line = now
-            print(f"{self.label}: {line}", file=self.stream, flush=True)
+            print(f"{self.label}: {self.line(done, details)}", file=self.stream, flush=True)
 
     def close(self) -> None:
         if self.bar is not None:

@@ -550,9 +550,10 @@ class Run:
         set_rng_state(state["rng"])
         return state["iteration"] + 1, resumed["global_step"], next_obs, next_done
 
-    def start_progress(self, total_steps: int, global_step: int, marks: list[int]) -> deque:
-        """Starts the progress display; returns the checkpoint marks still ahead."""
-        self.progress = Progress("training", total_steps, global_step, unit="steps")
+    def start_progress(self, global_step: int, batch_size: int, num_iterations: int) -> deque:
+        """Starts the progress display; returns the checkpoint marks still ahead of `global_step`."""
+        self.progress = Progress("training", num_iterations * batch_size, global_step, unit="steps")
+        marks = checkpoint_marks(self.args.total_timesteps, self.args.checkpoint_interval, batch_size)
         return deque(m for m in marks if m > global_step)
 
     def on_episode(self, episodic_return: float, episodic_length: int, step: int) -> None:
