@@ -380,17 +380,18 @@ def reproduce(args: Args) -> int:
 def export_agents(specs: list[RunSpec], folder: Path) -> Path:
     """Every checkpoint of `specs` as a shipped agent, in the sweep's layout
     (<folder>/<run>/checkpoints/step_*.pt, so that eval_gamma_sweep.py sweeps the folder with the runs'
-    own names), and <folder>/README.md listing them with the command that trained each. Returns the
-    README's path."""
-    rows = ["| run | env | variant | seed | steps | trained by |", "|---|---|---|---|---|---|"]
+    own names), and <folder>/README.md listing them with the command that trained each. The README keeps
+    the rows of runs exported into the folder before (one table's agents come from several grids).
+    Returns the README's path."""
+    readme = folder / "README.md"
+    rows = {name: row for name, row in readme_rows(readme).items() if (folder / name).is_dir()}
     for spec in specs:
         checkpoints = runs.checkpoints_of(spec.run_dir)
         for checkpoint in checkpoints:
             runs.export_agent(checkpoint, folder / spec.name / "checkpoints" / checkpoint.name)
         steps = ", ".join(f"{runs.checkpoint_step(c):,}" for c in checkpoints)
         command = " ".join(["python", Path(spec.command()[1]).name, *spec.command()[2:]])
-        rows.append(f"| {spec.name} | {spec.env_id} | {spec.variant} | {spec.seed} | {steps} | `{command}` |")
-    readme = folder / "README.md"
+        rows[spec.name] = f"| {spec.name} | {spec.env_id} | {spec.variant} | {spec.seed} | {steps} | `{command}` |"
     write_atomic(readme, "\n".join([
         "# Trained agents",
         "",
@@ -400,10 +401,26 @@ def export_agents(specs: list[RunSpec], folder: Path) -> Path:
         f"`python eval_gamma_sweep.py {folder} --output runs/sweeps/agents` (add `--gammas ...` for your own",
         "γ values), watch one with `--video`, load one with `ppo_pgg_<kind>.load_checkpoint(path)`.",
         "",
-        *rows,
+        README_HEADER,
+        "|---|---|---|---|---|---|",
+        *rows.values(),
         "",
     ]))  # fmt: skip
     return readme
+
+
+README_HEADER = "| run | env | variant | seed | steps | trained by |"
+
+
+def readme_rows(readme: Path) -> dict[str, str]:
+    """{run name: its table row} of an agents README that export_agents wrote; {} where there is none."""
+    if not readme.exists():
+        return {}
+    lines = readme.read_text().splitlines()
+    if README_HEADER not in lines:
+        return {}
+    table = lines[lines.index(README_HEADER) + 2 :]
+    return {row.split(" | ")[0].removeprefix("| "): row for row in table if row.startswith("| ")}
 
 
 def main() -> None:

@@ -60,6 +60,27 @@ def test_the_agents_are_exported_without_resume_state_and_sweep_to_the_same_epis
     assert (swept / "episodes.csv").read_text() == (local_results / "episodes.csv").read_text()
 
 
+def test_agents_of_a_second_grid_join_the_folder_and_its_readme(local_results, tmp_path):
+    """One table's agents come from several grids: exporting a second grid into the folder keeps the
+    first grid's agents and README rows, and drops the row of a run whose folder was removed."""
+    import shutil
+
+    folder = tmp_path / "agents"
+    shutil.copytree(local_results / "agents", folder)
+    first = reproduce.grid(tiny_args(local_results.parent.parent, "local"))
+    ppo, pgg = [s for s in first if s.variant == "ppo"], [s for s in first if s.variant == "pgg_g1.1"]
+    shutil.rmtree(folder)
+    reproduce.export_agents(ppo, folder)
+    reproduce.export_agents(pgg[:1], folder)
+    shutil.rmtree(folder / ppo[0].name)
+    reproduce.export_agents(pgg[1:], folder)
+    readme = (folder / "README.md").read_text()
+    listed = [line.split(" | ")[0].removeprefix("| ") for line in readme.splitlines()[10:] if line.startswith("| ")]
+    assert listed == [ppo[1].name, pgg[0].name, pgg[1].name]
+    assert sorted(p.name for p in folder.iterdir() if p.is_dir()) == sorted(listed)
+    assert readme.count("| run | env |") == 1
+
+
 def test_quick_preset_through_submitit_local_executor(local_results, tmp_path):
     assert reproduce.reproduce(tiny_args(tmp_path, "submitit", executor="submitit-local")) == 0
     results = tmp_path / "submitit" / "results"

@@ -20,6 +20,7 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
+from pgg_utils.runs import checkpoint_step
 
 SCRIPT = [sys.executable, str(ROOT / "eval_gamma_sweep.py")]
 
@@ -668,15 +669,21 @@ def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
     assert evaluated == [] and sweep.read_csv(tmp_path / "out" / "episodes.csv") == fresh
 
 
-def test_the_shipped_agents_load_and_sweep(tmp_path):
-    """The agents folder of results/continuous_rerun: pickle-free, without resume state, one per run and
-    step of its table, and sweepable as they are (two episodes here; the README's full re-sweep
-    reproduces the committed episodes.csv on the machine that trained them)."""
-    agents = ROOT / "results" / "continuous_rerun" / "agents"
+@pytest.mark.parametrize("table", ["discrete", "continuous"])
+def test_the_shipped_agents_load_and_sweep(table, tmp_path):
+    """The agents folder of a table: pickle-free, without resume state, each one a (run, step) of the
+    table's episodes.csv, listed in its README, and sweepable as they are (two episodes here; the README's
+    full re-sweep reproduces the committed episodes.csv on the machine that trained them)."""
+    agents = ROOT / "results" / table / "agents"
     files = sorted(agents.rglob("step_*.pt"))
-    assert len(files) == 2 * 2 * 5 * 5  # tasks × variants × seeds × step marks
+    with open(ROOT / "results" / table / "episodes.csv", newline="") as f:
+        swept = {(r["run"], int(r["step"])) for r in csv.DictReader(f)}
+    shipped = {(path.parent.parent.name, checkpoint_step(path)) for path in files}
+    assert files and shipped <= swept
+    readme = (agents / "README.md").read_text()
+    assert all(f"| {run} |" in readme for run, _ in shipped)
     agent, ckpt = sweep.load_any_checkpoint(files[0])
-    assert "resume" not in ckpt and ckpt["versions"]["mujoco"] == "2.3.7" and ckpt["code"]["commit"]
+    assert "resume" not in ckpt and ckpt["code"]["commit"]
     assert agent.null_obs.shape == (ckpt["obs_dim"],)
     output = sweep.sweep(sweep.Args(paths=(str(files[-1]),), gammas=(1.0, 1.1), episodes=2, output=str(tmp_path / "s")))
     rows = sweep.read_csv(output / "episodes.csv")
