@@ -1,9 +1,9 @@
 """Two sweeps of one grid, cell by cell: the same configurations trained on two software stacks
 (MuJoCo versions, machines) or at two code revisions. It is the cross-stack check of the results:
 
-    python benchmarks/compare_sweeps.py results/continuous_onestack/episodes.csv \\
-        results/continuous_device/episodes.csv --labels "MuJoCo 2.3.7" "MuJoCo 3.1.6" \\
-        --output results/continuous_onestack/compare_stacks.md
+    python benchmarks/compare_sweeps.py results/continuous/episodes.csv \\
+        results/continuous_device/episodes.csv --labels "MuJoCo 2.3.7 (table)" "MuJoCo 3.1.6" \\
+        --output results/continuous_device/compare_table.md
 
 A cell is (env, variant, checkpoint step, eval γ) with sampled actions and the learned null branch,
 its statistic the mean over seeds of each seed's mean return, as everywhere in `plot_results.py`.

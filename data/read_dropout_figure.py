@@ -14,8 +14,8 @@ the paper gives no numbers for them.
     python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
         --beside results/continuous/fig_continuous_pgg_drop0.1.png \
         --output results/continuous/side_by_side_pgg_drop0.1.png \
-        --ours results/continuous_{rerun,hopper_rerun,onestack,humanoid,dropout}/episodes.csv \
-        --provenance results/provenance.csv --table results/continuous_dropout/compare_paper_figure.md
+        --ours results/continuous/episodes.csv \
+        --provenance results/provenance.csv --table results/continuous/compare_paper_figure.md
 """
 
 import csv
