@@ -182,26 +182,6 @@ def config_label(ckpt: dict) -> str:
     return " ".join(words)
 
 
-def discover_checkpoints(paths, steps) -> list[Path]:
-    found = {}
-    for raw in paths:
-        path = Path(raw)
-        if not path.exists():
-            raise InputError(f"no such file or directory: {raw}")
-        matches = [path] if path.is_file() else sorted(path.rglob(f"checkpoints/{runs.CHECKPOINT_GLOB}"))
-        if not matches:
-            raise InputError(f"no checkpoints (checkpoints/{runs.CHECKPOINT_GLOB}) under {raw}")
-        for match in matches:  # one entry per file, however many of the given paths reach it
-            found.setdefault(match.resolve(), match)
-    found = list(found.values())
-    if steps is not None:
-        wanted = {runs.checkpoint_path(Path(), s).name for s in steps}
-        found = [p for p in found if p.name in wanted]
-        if not found:
-            raise InputError(f"no checkpoint at steps {list(steps)} under {list(paths)}")
-    return sorted(found)
-
-
 # --- the batched guided policy ---------------------------------------------------------------------
 
 
@@ -624,7 +604,7 @@ def sweep(args: Args) -> Path:
     """Runs (or resumes) the sweep; returns the output directory."""
     check_args(args)
     output = Path(args.output)
-    checkpoints = discover_checkpoints(args.paths, args.steps)
+    checkpoints = runs.find_checkpoints(args.paths, args.steps)
     lock = claim_output(output)
     threads = torch.get_num_threads()
     try:
@@ -736,7 +716,7 @@ def record_videos(args: Args) -> list[Path]:
     """--video: one video per γ of one checkpoint, the same episode (seed and noise) in each, and all
     of them side by side with γ and the return written on each panel (shorter episodes hold their
     last frame). Returns the files written."""
-    checkpoints = discover_checkpoints(args.paths, args.steps)
+    checkpoints = runs.find_checkpoints(args.paths, args.steps)
     if len(checkpoints) != 1:
         raise InputError(f"--video records one checkpoint; {len(checkpoints)} found "
                          "(name a checkpoint file, or narrow with --steps)")  # fmt: skip

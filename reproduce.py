@@ -377,6 +377,9 @@ def reproduce(args: Args) -> int:
     return len(tally.failed)
 
 
+README_HEADER = "| run | env | variant | seed | steps | trained by |"
+
+
 def export_agents(specs: list[RunSpec], folder: Path) -> Path:
     """Every checkpoint of `specs` as a shipped agent, in the sweep's layout
     (<folder>/<run>/checkpoints/step_*.pt, so that eval_gamma_sweep.py sweeps the folder with the runs'
@@ -407,9 +410,6 @@ def export_agents(specs: list[RunSpec], folder: Path) -> Path:
         "",
     ]))  # fmt: skip
     return readme
-
-
-README_HEADER = "| run | env | variant | seed | steps | trained by |"
 
 
 def readme_rows(readme: Path) -> dict[str, str]:

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from pgg_utils.arguments import ARGUMENT_RULES, guidance_error, run_name_error, training_arguments
-from pgg_utils.files import LockedError, lock_directory, write_atomic
+from pgg_utils.files import InputError, LockedError, lock_directory, write_atomic
 from pgg_utils.progress import Progress
 
 # 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
@@ -133,6 +133,28 @@ def checkpoint_step(path: Path) -> int:
 def checkpoints_of(run_dir: Path) -> list[Path]:
     """A run's checkpoints, in the order of their steps."""
     return sorted((Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB), key=checkpoint_step)
+
+
+def find_checkpoints(paths, steps=None) -> list[Path]:
+    """The checkpoint files that `paths` name or hold (run directories, agents folders, files), once each,
+    at `steps` if given, sorted; InputError with one line where a path has none."""
+    found = {}
+    for raw in paths:
+        path = Path(raw)
+        if not path.exists():
+            raise InputError(f"no such file or directory: {raw}")
+        matches = [path] if path.is_file() else sorted(path.rglob(f"checkpoints/{CHECKPOINT_GLOB}"))
+        if not matches:
+            raise InputError(f"no checkpoints (checkpoints/{CHECKPOINT_GLOB}) under {raw}")
+        for match in matches:  # one entry per file, however many of the given paths reach it
+            found.setdefault(match.resolve(), match)
+    found = list(found.values())
+    if steps is not None:
+        wanted = {checkpoint_path(Path(), s).name for s in steps}
+        found = [p for p in found if p.name in wanted]
+        if not found:
+            raise InputError(f"no checkpoint at steps {list(steps)} under {list(paths)}")
+    return sorted(found)
 
 
 def unused_name(path: Path) -> Path:
