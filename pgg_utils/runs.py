@@ -183,6 +183,21 @@ def package_versions() -> dict[str, str | None]:
     return {"python": platform.python_version(), **{p: version(p) for p in ("torch", "numpy", "gymnasium", "mujoco")}}
 
 
+def machine() -> str:
+    """The CPU of this process, as `AMD EPYC, family 25 model 1, AVX2, 2 CPUs`: training's bits depend on
+    it (the same code and stack trained different weights on two CPUs), so a checkpoint names it."""
+    fields = {}
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip(), value.strip())
+    except OSError:
+        pass
+    name = fields.get("model name") or platform.processor() or platform.machine()
+    family = f", family {fields['cpu family']} model {fields['model']}" if "cpu family" in fields else ""
+    return f"{name}{family}, {torch.backends.cpu.get_cpu_capability()}, {os.cpu_count()} CPUs"
+
+
 def code_revision(script: Path) -> dict:
     """The training code of a run, the script and this package: the git commit of its checkout where
     there is one (and whether those files differ from it; None where git cannot tell), and always their
@@ -611,6 +626,7 @@ class Run:
             "step_mark": int(mark),
             "args": asdict(self.args),
             "versions": package_versions(),
+            "machine": machine(),
             "code": self.code,
             "model": model,
             "resume": resume,

@@ -165,9 +165,10 @@ def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
     assert restored.return_count == saved.return_count == 1e-4 + 5 and restored.return_var == saved.return_var
 
 
-def test_checkpoint_records_the_software_stack(tmp_path):
+def test_checkpoint_records_the_software_stack_and_the_cpu(tmp_path):
     ckpt = checkpoint(train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
     assert ckpt["versions"]["torch"] == torch.__version__ and ckpt["versions"]["gymnasium"]
+    assert ckpt["machine"] == runs.machine() and torch.backends.cpu.get_cpu_capability() in ckpt["machine"]
     # The training code: the script and the pgg_utils modules it ran, by commit and by content.
     assert (
         len(ckpt["code"]["sha1"]) == 40
