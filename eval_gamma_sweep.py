@@ -36,10 +36,8 @@ summary.csv (per env, variant, config, step and γ: mean over seeds of the per-s
 its 95% confidence interval, see `mean_ci95`).
 """
 
-import csv
 import hashlib
 import io
-import json
 import multiprocessing
 import os
 import signal
@@ -59,7 +57,8 @@ import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import runs
 from pgg_utils.arguments import guidance_error
-from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, read_csv, write_csv_atomic
+from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
+from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, write_csv_atomic
 from pgg_utils.paper import PAPER_GAMMAS, REFERENCE_ARGS, is_mujoco, variant_id
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
@@ -71,21 +70,6 @@ from pgg_utils.video import labelled, write_video
 # from a larger one, so the one-row sequential reference pads to it; on the AMD EPYC this was written on,
 # products of 8 or more rows round alike, and the reference equals the cells to the bit there.
 MIN_FORWARD_ROWS = 8
-# Part of every cell's identity; raised when a fix changes what a cell evaluates to or holds, so that a
-# rerun recomputes cells from before it. 2: continuous actions clipped to the env's bounds. 3: each cell
-# in a batch of its own (its numbers no longer depend on the other cells), Gumbel noise in float64, and
-# the config column. 4: the evaluation stack and the action space in every row and a checksum per row
-# (cells of 3 have neither and could never be verified); returns and lengths are those of 3.
-EVALUATOR_REVISION = 4
-# The packages whose versions decide an episode's numbers (MuJoCo's physics, gymnasium's tasks and
-# wrappers, numpy's and torch's rounding): recorded in every row, and part of every cell's identity.
-STACK_COLUMNS = ["mujoco", "gymnasium", "numpy", "torch"]
-EPISODE_COLUMNS = [
-    "env_id", "variant", "config", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
-    "eval_guidance", "policy", "null_branch", "episode", "episode_seed", "return", "length",
-    *STACK_COLUMNS, "action_space",
-]  # fmt: skip
-CELL_COLUMNS = [*EPISODE_COLUMNS, "checksum"]  # a cell file's: each row proves that it is whole and whose it is
 SUMMARY_COLUMNS = [
     "env_id", "variant", "config", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy", "null_branch",
     "n_seeds", "n_episodes", "mean", "ci95", "ci_low", "ci_high", "ci_method", "seed_means",
@@ -385,63 +369,6 @@ class JobResult:
 
 def settings_of(args: Args) -> tuple:
     return (args.episodes, args.eval_seed, args.deterministic, args.uniform_null)
-
-
-def evaluation_stack() -> tuple[str, ...]:
-    """This process's versions of the STACK_COLUMNS packages, in that order ("none" where one is not installed)."""
-    versions = runs.package_versions()
-    return tuple(versions[package] or "none" for package in STACK_COLUMNS)
-
-
-def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple, digest: str | None = None,
-              stack: tuple | None = None) -> Path:  # fmt: skip
-    """One file per (checkpoint, γ, settings, evaluation stack). The checkpoint's bytes (`digest`,
-    their sha1; read from the file if not given), not its path or timestamp, are its identity: a
-    retrained run is never mistaken for the one evaluated before, and a run directory copied to
-    another machine or folder keeps its finished cells. The stack (this process's where not given)
-    is part of it too: a cell computed under another MuJoCo, gymnasium, numpy or torch is never reused."""
-    if digest is None:
-        digest = hashlib.sha1(Path(checkpoint).read_bytes()).hexdigest()
-    key = f"{digest}|{gamma!r}|{settings!r}|{stack or evaluation_stack()!r}|{EVALUATOR_REVISION}"
-    name = hashlib.sha1(key.encode()).hexdigest()[:16]
-    return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{name}.csv"
-
-
-def row_checksum(path: Path, row: dict) -> str:
-    """sha1 of a row's values and of its cell's file name, which encodes the cell's identity (cell_path):
-    a row that was edited, cut short or copied from another cell fails it."""
-    return hashlib.sha1(json.dumps([path.name, *(row[column] for column in EPISODE_COLUMNS)]).encode()).hexdigest()
-
-
-def write_cell(path: Path, rows: list[dict]) -> list[dict]:
-    """Writes a cell atomically, each value as the text read_cell will read and each row with its
-    checksum; returns the rows as written (str of a float is its repr, the digits csv writes)."""
-    written = []
-    for row in rows:
-        text = {column: str(row[column]) for column in EPISODE_COLUMNS}
-        written.append({**text, "checksum": row_checksum(path, text)})
-    write_csv_atomic(path, CELL_COLUMNS, written)
-    return written
-
-
-def read_cell(path: Path, episodes: int) -> list[dict]:
-    """The rows of a finished cell of `episodes` episodes. ValueError, saying why, for a file that
-    cannot be trusted: unreadable, another row count, a row cut short or whose checksum fails (an
-    edited value, a row of another cell), or episodes other than 0..episodes-1 each once."""
-    try:
-        rows = read_csv(path)
-    except (OSError, UnicodeDecodeError, csv.Error) as e:  # random bytes, a NUL, a directory in its place
-        raise ValueError(f"unreadable ({type(e).__name__})") from None
-    if len(rows) != episodes:
-        raise ValueError(f"{len(rows)} rows, not {episodes}")
-    for number, row in enumerate(rows, start=1):
-        if list(row) != CELL_COLUMNS or None in row.values():
-            raise ValueError(f"row {number} does not have the columns of a cell")
-        if row["checksum"] != row_checksum(path, row):
-            raise ValueError(f"row {number} does not match its checksum")
-    if {row["episode"] for row in rows} != {str(k) for k in range(episodes)}:
-        raise ValueError(f"its episodes are not 0..{episodes - 1} each once")
-    return rows
 
 
 def run_job(job: Job) -> JobResult:

@@ -20,6 +20,8 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
+from pgg_utils import cells
+from pgg_utils.files import read_csv
 from pgg_utils.runs import checkpoint_step
 
 SCRIPT = [sys.executable, str(ROOT / "eval_gamma_sweep.py")]
@@ -178,10 +180,10 @@ def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
 
 def test_a_fix_that_changes_results_invalidates_earlier_cells(runs, tmp_path, monkeypatch):
     settings = (50, 10_000, False, False)
-    before = sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings)
-    assert sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) == before
-    monkeypatch.setattr(sweep, "EVALUATOR_REVISION", sweep.EVALUATOR_REVISION + 1)
-    assert sweep.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) != before
+    before = cells.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings)
+    assert cells.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) == before
+    monkeypatch.setattr(cells, "EVALUATOR_REVISION", cells.EVALUATOR_REVISION + 1)
+    assert cells.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) != before
 
 
 def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, tmp_path):
@@ -192,11 +194,11 @@ def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, 
     shutil.copy(original, moved)  # a new path and a new timestamp, as on another machine
     assert moved.stat().st_mtime_ns != original.stat().st_mtime_ns
     output = tmp_path / "sweep"
-    assert sweep.cell_path(output, moved, 1.0, settings) == sweep.cell_path(output, original, 1.0, settings)
+    assert cells.cell_path(output, moved, 1.0, settings) == cells.cell_path(output, original, 1.0, settings)
     changed = tmp_path / "changed" / original.relative_to(runs)
     changed.parent.mkdir(parents=True)
     changed.write_bytes(original.read_bytes() + b"\0")
-    assert sweep.cell_path(output, changed, 1.0, settings) != sweep.cell_path(output, original, 1.0, settings)
+    assert cells.cell_path(output, changed, 1.0, settings) != cells.cell_path(output, original, 1.0, settings)
 
 
 def test_uniform_null_control_is_temperature_scaling(runs):
@@ -478,14 +480,14 @@ def test_a_cell_is_named_by_the_bytes_it_evaluated(runs, tmp_path, monkeypatch):
     sweep.sweep(args)
     digest = hashlib.sha1(evaluated_bytes).hexdigest()
     settings = sweep.settings_of(args)
-    evaluated_cell = sweep.cell_path(tmp_path / "out", target, 2.0, settings, digest)
+    evaluated_cell = cells.cell_path(tmp_path / "out", target, 2.0, settings, digest)
     assert [p.name for p in (tmp_path / "out" / "cells").iterdir()] == [evaluated_cell.name]
     assert "learning_rate=0.002" not in evaluated_cell.read_text()
     # The file now holds other bytes: a rerun evaluates them, into a cell of their own.
     evaluated = []
     monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
     sweep.sweep(args)
-    assert len(evaluated) == 1 and sweep.cell_path(tmp_path / "out", target, 2.0, settings).exists()
+    assert len(evaluated) == 1 and cells.cell_path(tmp_path / "out", target, 2.0, settings).exists()
     assert "learning_rate=0.002" in (tmp_path / "out" / "episodes.csv").read_text()
 
 
@@ -659,14 +661,14 @@ def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
     a cell written under an older labelling rule must not split its run into two configurations."""
     args = sweep_args(runs, tmp_path / "out")
     sweep.sweep(args)
-    fresh = sweep.read_csv(tmp_path / "out" / "episodes.csv")
+    fresh = read_csv(tmp_path / "out" / "episodes.csv")
     for cell in (tmp_path / "out" / "cells").glob("*.csv"):
-        rows = sweep.read_cell(cell, args.episodes)
-        sweep.write_cell(cell, [{**row, "config": "pgg_g1.1 stale=1"} for row in rows])  # whole, checksums and all
+        rows = cells.read_cell(cell, args.episodes)
+        cells.write_cell(cell, [{**row, "config": "pgg_g1.1 stale=1"} for row in rows])  # whole, checksums and all
     evaluated = []
     monkeypatch.setattr(sweep, "run_job", evaluated.append)
     sweep.sweep(args)
-    assert evaluated == [] and sweep.read_csv(tmp_path / "out" / "episodes.csv") == fresh
+    assert evaluated == [] and read_csv(tmp_path / "out" / "episodes.csv") == fresh
 
 
 @pytest.mark.parametrize("table", ["discrete", "continuous"])
@@ -686,5 +688,5 @@ def test_the_shipped_agents_load_and_sweep(table, tmp_path):
     assert "resume" not in ckpt and ckpt["code"]["commit"]
     assert agent.null_obs.shape == (ckpt["obs_dim"],)
     output = sweep.sweep(sweep.Args(paths=(str(files[-1]),), gammas=(1.0, 1.1), episodes=2, output=str(tmp_path / "s")))
-    rows = sweep.read_csv(output / "episodes.csv")
+    rows = read_csv(output / "episodes.csv")
     assert len(rows) == 4 and all(math.isfinite(float(r["return"])) for r in rows)
