@@ -526,9 +526,11 @@ def long_sweep(runs):
         gammas = ["1", "2", "3", "4", "5", "6", "7", "8"]
         argv = [*SCRIPT, str(runs / "discrete"), "--output", str(output), "--episodes", "1000", "--gammas", *gammas,
                 "--workers", str(workers)]  # fmt: skip
-        started.append(
-            subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
-        )
+        # SIGINT at its default, as in a terminal: a background job of a shell without job control (nohup
+        # pytest &) inherits it ignored, and the sweep would never see the Ctrl-C these tests send.
+        started.append(subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                        start_new_session=True,
+                                        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)))  # fmt: skip
         return started[-1]
 
     yield start
