@@ -5,6 +5,7 @@ import threading
 
 import numpy as np
 import pytest
+import torch
 from conftest import ROOT
 
 import ppo_pgg_discrete as pgg
@@ -146,3 +147,21 @@ def test_parity_without_cleanrl_python_is_one_line_of_error(tmp_path):
     )  # fmt: skip
     assert out.returncode == 2
     assert out.stderr == f"error: --cleanrl-python {tmp_path / 'no-python'} is not an executable\n"
+
+
+def test_same_training_cpu_tells_bit_identical_weights_from_a_difference_of_one_ulp(tmp_path):
+    import same_training_cpu
+
+    shipped = ROOT / "tests" / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
+    ckpt = runs.read_checkpoint_file(shipped)
+    total = len(ckpt["model"])
+    assert same_training_cpu.compare_weights(shipped, shipped) == (total, total, 0.0)
+    weight = ckpt["model"]["actor.0.weight"]
+    weight.view(-1)[0] = torch.nextafter(weight.view(-1)[0], torch.tensor(float("inf")))
+    nudged = tmp_path / "nudged.pt"
+    torch.save(ckpt, nudged)
+    equal, all_tensors, largest = same_training_cpu.compare_weights(shipped, nudged)
+    assert (equal, all_tensors) == (total - 1, total) and 0 < largest < 1e-6
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(same_training_cpu.InputError, match="junk.pt: unreadable checkpoint"):
+        same_training_cpu.compare_weights(shipped, tmp_path / "junk.pt")
