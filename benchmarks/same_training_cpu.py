@@ -32,16 +32,16 @@ class Args:
     """where the retrained run and its log go; a finished one there is compared again, not retrained"""
 
 
-def weight_tensors(checkpoint: Path) -> dict[str, torch.Tensor]:
+def read(checkpoint: Path) -> dict:
     try:
-        return runs.read_checkpoint_file(checkpoint)["model"]
+        return runs.read_checkpoint_file(checkpoint)
     except ValueError as e:
         raise InputError(f"{checkpoint}: {e}") from None
 
 
 def compare_weights(first: Path, second: Path) -> tuple[int, int, float]:
     """(tensors bit-identical, tensors in all, largest absolute difference) of two checkpoints' weights."""
-    a, b = weight_tensors(first), weight_tensors(second)
+    a, b = read(first)["model"], read(second)["model"]
     if a.keys() != b.keys() or any(a[k].shape != b[k].shape for k in a):
         raise InputError(f"{first} and {second} hold different networks")
     equal = sum(torch.equal(a[k], b[k]) for k in a)
@@ -53,10 +53,7 @@ def retrain(agent: Path, root: Path) -> Path:
     shipped = runs.checkpoints_of(agent)
     if not shipped:
         raise InputError(f"{agent} holds no checkpoints/step_*.pt")
-    try:
-        args = runs.read_checkpoint_file(shipped[-1])["args"]
-    except ValueError as e:
-        raise InputError(f"{shipped[-1]}: {e}") from None
+    args = read(shipped[-1])["args"]
     variant = variant_id(args["guidance"], args["cond_dropout"])
     spec = reproduce.RunSpec(args["env_id"], variant, args["seed"], str(root), args["total_timesteps"],
                              args["checkpoint_interval"], args["compile"])  # fmt: skip

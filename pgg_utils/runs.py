@@ -429,7 +429,7 @@ class Run:
         self.finished = False
         self.loaded: dict | None = None  # the checkpoint check_continuable read, kept for the resume
         self.notes: list[str] = []
-        self.code = None
+        self.code = self.machine = None
         self.recent_returns = deque(maxlen=20)
         self.progress: Progress | None = None
         self.writer = None
@@ -439,7 +439,7 @@ class Run:
         """Creates and locks the run directory and writes args.json. Raises RunDirError (one line) or
         OSError (not writable)."""
         run = cls(args, kind, script)
-        run.code = code_revision(run.script)
+        run.code, run.machine = code_revision(run.script), machine()
         run.dir.mkdir(parents=True, exist_ok=True)
         try:
             run.lock = lock_directory(run.dir)
@@ -626,7 +626,7 @@ class Run:
             "step_mark": int(mark),
             "args": asdict(self.args),
             "versions": package_versions(),
-            "machine": machine(),
+            "machine": self.machine,
             "code": self.code,
             "model": model,
             "resume": resume,

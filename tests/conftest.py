@@ -1,6 +1,7 @@
 """What several test modules share: the path to the scripts, one-thread torch, and the helpers that
 train a tiny run and run a script as a user would."""
 
+import signal
 import subprocess
 import sys
 from dataclasses import replace
@@ -41,6 +42,13 @@ def run_script(script: str, *flags, **kwargs) -> subprocess.CompletedProcess:
     return subprocess.run(
         [sys.executable, str(ROOT / script), *flags], capture_output=True, text=True, timeout=300, **kwargs
     )
+
+
+def default_sigint() -> None:
+    """preexec_fn for a child that a test stops with SIGINT, as Ctrl-C in a terminal would: SIGINT at its
+    default. A background job of a shell without job control (`nohup pytest &`) starts with SIGINT
+    ignored, its children inherit that, and Python then never raises KeyboardInterrupt."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def one_line_error(proc: subprocess.CompletedProcess, code: int = 2) -> str:

@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
+from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, small_args, train
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
@@ -233,10 +233,8 @@ def test_a_run_directory_in_use_is_refused(tmp_path):
 def test_ctrl_c_exits_130_with_one_line_saying_what_is_kept(tmp_path):
     script = ROOT / "ppo_pgg_discrete.py"
     flags = ["--output-dir", str(tmp_path), "--run-name", "stopped", "--checkpoint-interval", "2048"]
-    # A shell without job control starts background jobs with SIGINT ignored, and Python then never
-    # raises KeyboardInterrupt: this test (run from such a job) would wait in vain. Ctrl-C's default.
     proc = subprocess.Popen([sys.executable, str(script), *flags], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # fmt: skip
+                            text=True, preexec_fn=default_sigint)  # fmt: skip
     first = tmp_path / "stopped" / "checkpoints" / "step_000002048.pt"
     deadline = time.time() + 120
     while not first.exists() and time.time() < deadline:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, train
+from conftest import ROOT, default_sigint, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
@@ -526,11 +526,8 @@ def long_sweep(runs):
         gammas = ["1", "2", "3", "4", "5", "6", "7", "8"]
         argv = [*SCRIPT, str(runs / "discrete"), "--output", str(output), "--episodes", "1000", "--gammas", *gammas,
                 "--workers", str(workers)]  # fmt: skip
-        # SIGINT at its default, as in a terminal: a background job of a shell without job control (nohup
-        # pytest &) inherits it ignored, and the sweep would never see the Ctrl-C these tests send.
         started.append(subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                                        start_new_session=True,
-                                        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL)))  # fmt: skip
+                                        start_new_session=True, preexec_fn=default_sigint))  # fmt: skip
         return started[-1]
 
     yield start
