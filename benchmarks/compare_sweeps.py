@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
 from pgg_utils.agreement import compare_row, fmt, fmt_p, p_is, step_label
 from pgg_utils.files import InputError, one_line_errors, write_atomic
-from pgg_utils.paper import paper_name
+from pgg_utils.paper import paper_name, variant_rank
 from pgg_utils.stats import ALPHA, correct_family, sign_test
 
 
@@ -72,7 +72,7 @@ def check_same_config(first: dict, second: dict) -> None:
 
 def compare(first: dict, second: dict, second_label: str) -> list[dict]:
     """One row per cell of both sweeps, first against second (Welch), Holm over all of them."""
-    shared = sorted(first.keys() & second.keys(), key=lambda k: (k[0], plots.variant_rank(k[1]), k[1], k[2], k[3]))
+    shared = sorted(first.keys() & second.keys(), key=lambda k: (k[0], variant_rank(k[1]), k[1], k[2], k[3]))
     if not shared:
         raise InputError("the two sweeps have no cell (env, variant, step, eval γ) in common")
     check_same_config(first, second)

@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
 from pgg_utils.agreement import fmt, fmt_p, step_label
 from pgg_utils.files import one_line_errors, write_atomic, write_csv_atomic
-from pgg_utils.paper import paper_name
+from pgg_utils.paper import paper_name, variant_rank
 from pgg_utils.selection import BASELINE_GAMMA, GROUP_COLUMNS, INCOMPLETE, TESTED, held_out, summary_by_env
 from pgg_utils.stats import ALPHA
 
@@ -123,7 +123,7 @@ def main() -> None:
     with one_line_errors():
         selection, fresh = episodes(args.selection, args), episodes(args.fresh, args)
         rows, unmatched = held_out(selection, fresh)
-        rows.sort(key=lambda r: (r["env_id"], plots.variant_rank(r["variant"]), r["variant"], r["config"], r["step"]))
+        rows.sort(key=lambda r: (r["env_id"], variant_rank(r["variant"]), r["variant"], r["config"], r["step"]))
         text = report(rows, unmatched, args, (seed_range(selection), seed_range(fresh)))
         output = Path(args.output)
         write_csv_atomic(output / "heldout_gamma.csv", GROUP_COLUMNS, rows)

@@ -95,3 +95,13 @@ def is_mujoco(env_id: str) -> bool:
     except gym.error.Error:
         return False
     return isinstance(entry_point, str) and entry_point.startswith("gymnasium.envs.mujoco")
+
+
+def variant_rank(variant: str) -> int:
+    """A variant's place in the paper's order (VARIANTS), any other after them: how tables and legends sort."""
+    return list(VARIANTS).index(variant) if variant in VARIANTS else len(VARIANTS)
+
+
+def series_name(variant: str, series: str) -> str:
+    """The paper's name of a variant, with its configuration label where one env and variant hold several."""
+    return paper_name(variant) + (f" [{series}]" if series else "")

@@ -11,6 +11,7 @@ from conftest import ROOT
 from scipy import stats
 
 import plot_results as plots
+from pgg_utils import figures
 from pgg_utils.files import read_csv
 from pgg_utils.stats import (
     bootstrap_coverage,
@@ -301,14 +302,14 @@ def test_two_configs_are_never_pooled(tmp_path):
     plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
     table = (tmp_path / "out" / "table_discrete.md").read_text()
     assert "| PPO [learning_rate=0.002] | 366.0 |" in table and "| PPO [learning_rate=default] | 190.0 |" in table
-    fig = plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
+    fig = figures.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
     labels = {
         line.get_label(): list(line.get_ydata())
         for line in fig.axes[0].get_lines()
         if not line.get_label().startswith("_")
     }
     assert labels == {}  # no PGG data: the panel says "not run" instead of drawing PPO alone
-    fig = plots.figure_for_variant(summary, ["CartPole-v1"], "ppo")
+    fig = figures.figure_for_variant(summary, ["CartPole-v1"], "ppo")
     labels = {
         line.get_label(): list(line.get_ydata())
         for line in fig.axes[0].get_lines()
@@ -375,12 +376,12 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
     assert tmp_path / "out" / "provenance.md" in written
     summary = summary_of(tmp_path / "here", tmp_path / "there", provenance=str(provenance))
     assert (
-        plots.panel_title("Walker2d-v4", [r for r in summary if r["env_id"] == "Walker2d-v4"])
+        figures.panel_title("Walker2d-v4", [r for r in summary if r["env_id"] == "Walker2d-v4"])
         == "Walker2d-v4 (3 seeds, MuJoCo 3.1.6)"
     )
     walker = [r for r in summary if r["env_id"] == "Walker2d-v4"]
     mixed = walker + [dict(r, variant="pgg_drop0.1", mujoco="2.3.7") for r in walker]
-    assert plots.panel_title("Walker2d-v4", mixed) == "Walker2d-v4 (3 seeds, PPO on MuJoCo 3.1.6)"
+    assert figures.panel_title("Walker2d-v4", mixed) == "Walker2d-v4 (3 seeds, PPO on MuJoCo 3.1.6)"
 
 
 # --- what plot_results needs, where an env belongs, what a rerun leaves ----------------------------
@@ -460,7 +461,7 @@ def legend_labels(fig) -> list[str]:
 def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
     written = generate(sweep_dir, tmp_path)
     summary = summary_of(sweep_dir)
-    fig = plots.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "pgg_g1.1")
+    fig = figures.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "pgg_g1.1")
     for ax in fig.axes:
         lines = [line for line in ax.get_lines() if not line.get_label().startswith("_")]  # not error-bar caps
         assert [line.get_label() for line in lines] == ["PPO", "γ = 1", "γ = 2"]
@@ -473,7 +474,7 @@ def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
     assert "pgg_g1.1" not in fig._suptitle.get_text() and "checkpoints, eval guidance" not in fig._suptitle.get_text()
     cartpole = next(line for line in fig.axes[1].get_lines() if line.get_label() == "γ = 2")
     assert list(cartpole.get_ydata()) == [101.0, 500.0]
-    ppo_fig = plots.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "ppo")
+    ppo_fig = figures.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "ppo")
     assert ppo_fig._suptitle.get_text().startswith("PPO")
     for path in written:
         if path.suffix in (".png", ".pdf"):
@@ -492,13 +493,13 @@ def test_continuous_figures_have_the_paper_layout_with_not_run_panels(tmp_path):
     names = {p.name for p in written}
     assert {"fig_continuous_ppo.png", "fig_continuous_pgg_g1.1.png", "fig_continuous_pgg_drop0.1.png"} <= names
     summary = summary_of(tmp_path / "episodes.csv")
-    layout, cols = plots.figure_layout("continuous", ["Hopper-v4"])
-    fig = plots.figure_for_variant(summary, ["Hopper-v4"], "pgg_g1.1", layout, cols)
+    layout, cols = figures.figure_layout("continuous", ["Hopper-v4"])
+    fig = figures.figure_for_variant(summary, ["Hopper-v4"], "pgg_g1.1", layout, cols)
     panels = [ax for ax in fig.axes if ax.get_visible()]
     assert len(panels) == 6 and panels[0].get_subplotspec().get_gridspec().get_geometry() == (2, 3)
     not_run = [ax.get_title() for ax in panels if any(t.get_text() == "not run" for t in ax.texts)]
     assert not_run == ["HalfCheetah-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4"]
-    dropout = plots.figure_for_variant(summary, ["Hopper-v4"], "pgg_drop0.1", layout, cols)
+    dropout = figures.figure_for_variant(summary, ["Hopper-v4"], "pgg_drop0.1", layout, cols)
     assert all(any(t.get_text() == "not run" for t in ax.texts) for ax in dropout.axes if ax.get_visible())
 
 
@@ -509,8 +510,8 @@ def test_cartpole_axis_is_clipped_to_its_returns_and_clipped_bands_are_marked(tm
              ("CartPole-v1", "pgg_g1.1", 200000, 1.0): [450.0, 500.0], ("CartPole-v1", "pgg_g1.1", 200000, 2.0): [480.0, 500.0]}  # fmt: skip
     write_episodes(tmp_path / "episodes.csv", episode_rows(means))
     summary = summary_of(tmp_path / "episodes.csv")
-    for fig in (plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1"),
-                plots.gamma_response(summary, ["CartPole-v1"], step=None)):  # fmt: skip
+    for fig in (figures.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1"),
+                figures.gamma_response(summary, ["CartPole-v1"], step=None)):  # fmt: skip
         ax = fig.axes[0]
         low, high = ax.get_ylim()
         assert -20 <= low and high <= 520  # 0–500 and a small margin, not −1,000 to 1,500
@@ -532,18 +533,18 @@ def test_one_gamma_and_one_variant_have_one_colour_in_every_figure(tmp_path):
     write_episodes(tmp_path / "both.csv", episode_rows(means))
     write_episodes(tmp_path / "guided.csv", episode_rows({k: v for k, v in means.items() if k[1] == "pgg_g1.1"}))
     summary = summary_of(tmp_path / "both.csv")
-    ppo_fig = plots.figure_for_variant(summary, ["CartPole-v1"], "ppo")
-    pgg_fig = plots.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
+    ppo_fig = figures.figure_for_variant(summary, ["CartPole-v1"], "ppo")
+    pgg_fig = figures.figure_for_variant(summary, ["CartPole-v1"], "pgg_g1.1")
     for gamma in (2.0, 5.0):  # the PPO figure has no γ = 1 line: its first γ must not take γ = 1's colour
-        expected = (plots.gamma_colour(gamma, "discrete"), plots.gamma_marker(gamma, "discrete"))
+        expected = (figures.gamma_colour(gamma, "discrete"), figures.gamma_marker(gamma, "discrete"))
         assert line_style(ppo_fig, f"γ = {gamma:g}") == line_style(pgg_fig, f"γ = {gamma:g}") == expected
     assert len({line_style(pgg_fig, f"γ = {g}")[0] for g in (1, 2, 5)}) == 3
-    assert plots.gamma_colour(1.05, "continuous") != plots.gamma_colour(1.0, "continuous")
-    beside_ppo = plots.gamma_response(summary, ["CartPole-v1"], step=None)
-    alone = plots.gamma_response(summary_of(tmp_path / "guided.csv"), ["CartPole-v1"], step=None)
+    assert figures.gamma_colour(1.05, "continuous") != figures.gamma_colour(1.0, "continuous")
+    beside_ppo = figures.gamma_response(summary, ["CartPole-v1"], step=None)
+    alone = figures.gamma_response(summary_of(tmp_path / "guided.csv"), ["CartPole-v1"], step=None)
     name = "PGG, γ_train = 1.1"
     assert line_style(beside_ppo, name) == line_style(alone, name)  # not a colour by position in the legend
-    assert line_style(beside_ppo, name)[0] == matplotlib.colors.to_hex(plots.variant_colour("pgg_g1.1"))
+    assert line_style(beside_ppo, name)[0] == matplotlib.colors.to_hex(figures.variant_colour("pgg_g1.1"))
     assert line_style(beside_ppo, "PPO")[0] == "#000000"
     matplotlib.pyplot.close("all")
 
@@ -581,18 +582,18 @@ def test_a_line_from_older_training_code_is_marked_in_its_panel(tmp_path):
     new_row = f"{tmp_path / 'new' / 'episodes.csv'},def5678,2.3.7,two cores,bbb0002,2026-11-29 03:53,\n"
     provenance.write_text(header + old_row + new_row)
     summary = summary_of(tmp_path / "old", tmp_path / "new", provenance=str(provenance))
-    fig = plots.figure_for_variant(summary, ["Hopper-v4"], "pgg_g1.1")
+    fig = figures.figure_for_variant(summary, ["Hopper-v4"], "pgg_g1.1")
     assert fig.axes[0].get_title() == "Hopper-v4 (3 seeds)\nPPO: older code (aaa0001)"
-    assert plots.figure_for_variant(summary, ["Hopper-v4"], "ppo").axes[0].get_title() == "Hopper-v4 (3 seeds)"
-    response = plots.gamma_response(summary, ["Hopper-v4"], step=None).axes[0].get_title()
+    assert figures.figure_for_variant(summary, ["Hopper-v4"], "ppo").axes[0].get_title() == "Hopper-v4 (3 seeds)"
+    response = figures.gamma_response(summary, ["Hopper-v4"], step=None).axes[0].get_title()
     assert response == "Hopper-v4 at 200k steps\n3 seeds\nPPO: older code\n(aaa0001)"
     same = summary_of(tmp_path / "old", tmp_path / "new")  # no provenance: nothing to mark
-    assert plots.figure_for_variant(same, ["Hopper-v4"], "pgg_g1.1").axes[0].get_title() == "Hopper-v4 (3 seeds)"
+    assert figures.figure_for_variant(same, ["Hopper-v4"], "pgg_g1.1").axes[0].get_title() == "Hopper-v4 (3 seeds)"
     matplotlib.pyplot.close("all")
 
 
 def test_gamma_response_labels_exactly_the_swept_gammas(sweep_dir):
-    fig = plots.gamma_response(summary_of(sweep_dir), ["CartPole-v1"], step=None)
+    fig = figures.gamma_response(summary_of(sweep_dir), ["CartPole-v1"], step=None)
     fig.canvas.draw()
     ax = fig.axes[0]
     assert ax.get_xscale() == "log"
@@ -601,7 +602,7 @@ def test_gamma_response_labels_exactly_the_swept_gammas(sweep_dir):
     assert legend_labels(fig) == ["PPO", "PGG, γ_train = 1.1"]
 
 
-def test_learning_curves_draw_few_points_and_say_so(tmp_path):
+def test_learning_curves_draw_few_points_and_say_so(sweep_dir, tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
     for seed in (1, 2):
@@ -614,20 +615,14 @@ def test_learning_curves_draw_few_points_and_say_so(tmp_path):
         for step, value in ((512, 20.0 + seed), (1024, 40.0 + seed)):  # episodes logged at two steps only
             writer.add_scalar("charts/episodic_return", value, step)
         writer.close()
-    written = []
-    captured = {}
-    real_save = plots.save_figure
-    plots.save_figure = lambda fig, stem, out: captured.setdefault("fig", fig) and real_save(fig, stem, out)
-    try:
-        plots.learning_curves([str(tmp_path / "runs")], tmp_path / "out", written)
-    finally:
-        plots.save_figure = real_save
-    ax = captured["fig"].axes[0]
+    fig = figures.learning_curves(plots.run_args_files([str(tmp_path / "runs")]))
+    ax = fig.axes[0]
     line = next(line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)")
     assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
-    assert line.get_color() == plots.variant_colour("pgg_g1.1")  # the variant's colour in every figure
+    assert line.get_color() == figures.variant_colour("pgg_g1.1")  # the variant's colour in every figure
     assert any("too few points" in t.get_text() and "only 2 points" in t.get_text() for t in ax.texts)
-    assert (tmp_path / "out" / "learning_curves.png").exists()
+    written = generate(sweep_dir, tmp_path, runs=(str(tmp_path / "runs"),))
+    assert tmp_path / "out" / "learning_curves.png" in written
 
 
 # --- summaries and controls -----------------------------------------------------------------------
@@ -740,7 +735,7 @@ def test_learning_curves_never_count_one_seed_twice(tmp_path):
         writer.add_scalar("charts/episodic_return", 20.0, 512)
         writer.close()
     with pytest.raises(plots.InputError, match="two runs of one configuration and seed 1"):
-        plots.learning_curves([str(tmp_path / "a"), str(tmp_path / "b")], tmp_path / "out", [])
+        figures.learning_curves(plots.run_args_files([str(tmp_path / "a"), str(tmp_path / "b")]))
 
 
 PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"

@@ -1,0 +1,437 @@
+"""The figures of plot_results.py, drawn from its summary rows (one row per configuration, step and
+eval γ; plot_results.summarise), in one palette: one colour per training variant, one colour and marker
+per eval γ, the y-axis never past a task's possible return. Each function returns a matplotlib figure;
+plot_results writes it. No torch."""
+
+import io
+import itertools
+import json
+import math
+import zlib
+from collections import defaultdict
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.colors
+import matplotlib.lines
+import matplotlib.pyplot as plt
+import matplotlib.ticker
+import numpy as np
+
+from pgg_utils.agreement import REFERENCE_MUJOCO, step_label
+from pgg_utils.arguments import RUN_ONLY_ARGS
+from pgg_utils.files import InputError
+from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_id, variant_rank
+from pgg_utils.stats import mean_ci95
+
+# The possible return of a task, where it has one: axes never extend past it.
+RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
+                "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
+# Run arguments that do not change what is trained (or only its bits; pgg_utils.arguments names them),
+# and the seed: never part of a configuration.
+NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
+MARKERS = "osD^vPX*hp<>"
+# The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
+# variants fixed, any other a fixed colour of its name) and one per eval γ (viridis by the γ's place in
+# its table's grid of the paper, PAPER_GAMMAS; between grid points by log γ, past its ends the end colours).
+VARIANT_COLOURS = {"ppo": "black", "pgg_g1.1": "C1", "pgg_drop0.1": "C2"}
+OTHER_VARIANT_COLOURS = ("C0", "C3", "C4", "C5", "C6", "C8", "C9")
+GAMMA_CMAP, GAMMA_CMAP_SPAN = "viridis", (0.0, 0.9)  # the paper's: dark for γ = 1, light green for its largest γ
+LINE_STYLES = ("-", "--", ":", "-.")  # several configurations of one variant in one colour
+
+
+# --- the summary rows, as figures and tables look them up -----------------------------------------
+
+
+def ordered_series(summary, variant: str | None = None) -> list[tuple[str, str]]:
+    """The (variant, series) pairs of the rows (of one variant, if given), in the paper's order."""
+    found = {(r["variant"], r["series"]) for r in summary if variant is None or r["variant"] == variant}
+    return sorted(found, key=lambda vs: (variant_rank(vs[0]), vs[0], vs[1]))
+
+
+def cell_index(summary: list[dict]) -> dict:
+    """(env, variant, series, step, eval γ) -> summary row."""
+    return {(r["env_id"], r["variant"], r["series"], int(r["step"]), float(r["eval_guidance"])): r for r in summary}
+
+
+def other_mujoco(row: dict | None) -> bool:
+    """Whether a cell comes from a MuJoCo other than the tables' (it is marked † and named in titles)."""
+    return bool(row and row.get("mujoco") and row["mujoco"] != REFERENCE_MUJOCO)
+
+
+# --- drawing -------------------------------------------------------------------------------------
+
+
+def render(fig) -> dict[str, bytes]:
+    """{"png": ..., "pdf": ...}: the figure rendered in memory (the PDF without a date, so that it
+    regenerates bit for bit), and closed."""
+    images = {}
+    for image_format, metadata in (("png", None), ("pdf", {"CreationDate": None})):
+        image = io.BytesIO()
+        fig.savefig(image, format=image_format, dpi=200, bbox_inches="tight", metadata=metadata)
+        images[image_format] = image.getvalue()
+    plt.close(fig)
+    return images
+
+
+def panels(n: int, cols: int | None = None):
+    cols = cols or min(n, 3)
+    rows = math.ceil(n / cols)
+    size = (4.4, 3.2) if n == 1 else (3.4 * cols, 2.7 * rows)  # a lone panel next to a legend needs room
+    fig, axes = plt.subplots(rows, cols, figsize=size, squeeze=False, layout="constrained")
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    return fig, list(axes.ravel()[:n])
+
+
+def plot_series(ax, xs, rows, errorbars=True, band_alpha=0.12, **style):
+    """A line of means with its 95% CI as a band and, at the points, error bars. Returns the line and
+    (xs, means, half-widths) for marking clipped bands."""
+    xs = np.asarray(xs, dtype=float)
+    means = np.array([float(r["mean"]) for r in rows])
+    cis = np.nan_to_num(np.array([float(r["ci95"]) for r in rows]))
+    (line,) = ax.plot(xs, means, **style)
+    ax.fill_between(xs, means - cis, means + cis, color=line.get_color(), alpha=band_alpha, linewidth=0)
+    if errorbars:
+        ax.errorbar(xs, means, yerr=cis, fmt="none", ecolor=line.get_color(), capsize=2, linewidth=0.8, alpha=0.8)
+    return line, (xs, means, cis, line.get_color())
+
+
+def steps_formatter(x, _pos) -> str:
+    return f"{x / 1e6:g}M" if x >= 1e6 else f"{x / 1e3:g}K" if x else "0"
+
+
+def style_axis(ax, title: str, xlabel: str, ylabel: str, steps_on_x: bool) -> None:
+    ax.set_title(title, fontsize=9)
+    ax.set_xlabel(xlabel, fontsize=8)
+    ax.set_ylabel(ylabel, fontsize=8)
+    ax.tick_params(labelsize=7)
+    ax.grid(alpha=0.3)
+    if steps_on_x:
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
+
+
+def not_run(ax, env: str) -> None:
+    ax.text(0.5, 0.5, "not run", ha="center", va="center", transform=ax.transAxes, fontsize=10, color="0.45")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_color("0.8")
+    ax.set_title(env, fontsize=9)
+
+
+def set_y_range(ax, env: str, drawn: list, few: bool = False) -> bool:
+    """Fits the y-axis to the data, but never past the task's possible returns, and, with fewer than 3
+    seeds where the bands dwarf the means (t_{0.975,1} = 12.7), to the means. Marks every band that runs
+    past the axis with a triangle at the edge. Returns whether any band was clipped."""
+    if not drawn:
+        return False
+    means = np.concatenate([d[1] for d in drawn])
+    cis = np.concatenate([d[2] for d in drawn])
+    lo, hi = float(np.nanmin(means - cis)), float(np.nanmax(means + cis))
+    m_lo, m_hi = float(np.nanmin(means)), float(np.nanmax(means))
+    span = (m_hi - m_lo) or abs(m_hi) or 1.0
+    if few and hi - lo > 3 * span:
+        lo, hi = m_lo - 0.3 * span, m_hi + 0.3 * span
+    pad = 0.05 * ((hi - lo) or 1.0)
+    lo, hi = lo - pad, hi + pad
+    if env in RETURN_RANGE:
+        r_lo, r_hi = RETURN_RANGE[env]
+        r_pad = 0.03 * (r_hi - r_lo)
+        lo, hi = max(lo, r_lo - r_pad), min(hi, r_hi + r_pad)
+    ax.set_ylim(lo, hi)
+    clipped = False
+    for xs, ms, hs, colour in drawn:
+        for mask, edge, marker in ((ms + hs > hi, hi, "^"), (ms - hs < lo, lo, "v")):
+            if mask.any():
+                clipped = True
+                ax.scatter(xs[mask], np.full(mask.sum(), edge), marker=marker, s=14, color=colour, clip_on=False,
+                           zorder=6, edgecolors="white", linewidths=0.4)  # fmt: skip
+    return clipped
+
+
+def clipped_handle():
+    return matplotlib.lines.Line2D([], [], linestyle="none", marker="^", color="0.3", markersize=4,
+                                   label="CI runs past the axis (clipped)")  # fmt: skip
+
+
+def seeds_label(rows) -> str:
+    counts = sorted({int(r["n_seeds"]) for r in rows})
+    text = str(counts[0]) if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    return f"{text} seed" + ("" if text == "1" else "s")
+
+
+def panel_notes(rows, sep: str = " ") -> tuple[str, str]:
+    """(`n seeds, MuJoCo v`, `PPO: older code (rev)`): what a panel's title says of its cells. The
+    variants run on another MuJoCo where the others were not are named; so are those whose training
+    code (provenance.csv's code and code_date) is older than the newest in the panel ("" if none),
+    `sep` before the revision."""
+    extra = [seeds_label(rows)]
+    other = [r for r in rows if other_mujoco(r)]
+    if other:
+        versions = f"MuJoCo {', '.join(sorted({r['mujoco'] for r in other}))}"
+        if len(other) < len(rows):
+            versions = f"{variant_names(other)} on {versions}"
+        extra.append(versions)
+    newest = max((r.get("code_date", "") for r in rows), default="")
+    older = [r for r in rows if r.get("code_date") and r["code_date"] < newest]
+    revisions = ", ".join(sorted({r["code"] for r in older}))
+    return ", ".join(extra), (f"{variant_names(older, short=True)}: older code{sep}({revisions})" if older else "")
+
+
+def variant_names(rows, short: bool = False) -> str:
+    """The paper's names of the rows' variants, in its order; `short` without "PGG, " (for panel titles)."""
+    names = [paper_name(v) for v in sorted({r["variant"] for r in rows}, key=lambda v: (variant_rank(v), v))]
+    return ", ".join(name.removeprefix("PGG, ") if short else name for name in names)
+
+
+def panel_title(env: str, rows) -> str:
+    """`env (n seeds, MuJoCo v)`, and on a second line the variants of older training code, if any."""
+    extra, code = panel_notes(rows)
+    return f"{env} ({extra})" + (f"\n{code}" if code else "")
+
+
+def variant_colour(variant: str) -> str:
+    """The colour of a training variant in every figure (VARIANT_COLOURS; any other by a hash of its name)."""
+    if variant in VARIANT_COLOURS:
+        return VARIANT_COLOURS[variant]
+    return OTHER_VARIANT_COLOURS[zlib.crc32(variant.encode()) % len(OTHER_VARIANT_COLOURS)]
+
+
+def gamma_marker(gamma: float, kind: str) -> str:
+    """The marker of an eval γ in every figure of its table: one per γ of the paper's grid, another for the rest."""
+    grid = PAPER_GAMMAS[kind]
+    return MARKERS[grid.index(gamma)] if gamma in grid else MARKERS[len(grid)]
+
+
+def gamma_colour(gamma: float, kind: str) -> str:
+    """The colour of an eval γ in every figure of its table: its place in the paper's γ grid of the kind."""
+    grid = np.log(PAPER_GAMMAS[kind])
+    place = np.interp(math.log(max(gamma, 1e-12)), grid, np.linspace(*GAMMA_CMAP_SPAN, len(grid)))
+    return matplotlib.colors.to_hex(plt.get_cmap(GAMMA_CMAP)(place))
+
+
+def few_seeds(rows) -> bool:
+    return min(int(r["n_seeds"]) for r in rows) < 3
+
+
+def dodge(xs, index: int, count: int, spacing: float) -> np.ndarray:
+    """Shifts line `index` of `count` sideways by a little, so that stacked lines and their error bars
+    stay apart."""
+    return np.asarray(xs, dtype=float) + (index - (count - 1) / 2) * 0.25 * spacing / max(count - 1, 1)
+
+
+def legend_right(fig, entries: list, title: str) -> None:
+    """One legend for the figure, right of the panels, in the given order (no duplicates)."""
+    seen, handles, labels = set(), [], []
+    for _, label, handle in sorted(entries, key=lambda e: e[0]):
+        if label not in seen:
+            seen.add(label)
+            handles.append(handle)
+            labels.append(label)
+    if handles:
+        fig.legend(
+            handles, labels, loc="outside right center", fontsize=7, frameon=False, title=title, title_fontsize=7
+        )
+
+
+def figure_layout(kind: str, envs: list[str]) -> tuple[list[str], int | None]:
+    """The panels of a figure: continuous, the paper's six tasks in 2×3 (and any others after them)."""
+    if kind == "continuous":
+        layout = list(PAPER_ENVS["continuous"]) + [e for e in envs if e not in PAPER_ENVS["continuous"]]
+        return layout, 3
+    return list(envs), None
+
+
+def figure_for_variant(
+    summary,
+    envs,
+    variant,
+    layout: list[str] | None = None,
+    cols: int | None = None,
+    gammas=None,
+    title: str | None = None,
+):
+    """The paper's figure: return against training steps per env; PPO solid black (eval γ=1), one
+    dashed line per eval γ of `variant` (those in `gammas`, default all), each in its γ's colour and
+    marker and with a small sideways offset. Envs of `layout` without data are empty panels labelled
+    "not run". `title`: the figure's, where it is not the variant's whole figure."""
+    layout = layout or list(envs)
+    cells = cell_index(summary)
+    kind = summary[0]["kind"] if summary else "discrete"
+    ppo_series = [s for _, s in ordered_series(summary, "ppo")]
+    own_series = [s for _, s in ordered_series(summary, variant)] if variant != "ppo" else ppo_series
+    swept = {float(r["eval_guidance"]) for r in summary if r["variant"] == variant}
+    gammas = sorted(swept if gammas is None else swept & set(gammas))
+    if variant == "ppo":
+        gammas = [g for g in gammas if g != 1.0]  # γ = 1 is the black PPO line itself
+    styles = ["--", ":", "-.", (0, (5, 1, 1, 1))]
+    fig, axes = panels(len(layout), cols)
+    entries, any_clipped = [], False
+    for ax, env in zip(axes, layout):
+        env_rows = [r for r in summary if r["env_id"] == env and r["variant"] in (variant, "ppo")]
+        if not any(r["variant"] == variant for r in env_rows):
+            not_run(ax, env)
+            continue
+        steps = sorted({int(r["step"]) for r in env_rows})
+        spacing = min(np.diff(steps)) if len(steps) > 1 else steps[0]
+        few = few_seeds(env_rows)
+        drawn = []
+        for i, series in enumerate(ppo_series):
+            points = [(s, cells[(env, "ppo", series, s, 1.0)]) for s in steps if (env, "ppo", series, s, 1.0) in cells]
+            if points:
+                label = series_name("ppo", series) + (" (γ = 1)" if variant == "ppo" else "")
+                line, data = plot_series(ax, [p[0] for p in points], [p[1] for p in points], errorbars=not few,
+                                         band_alpha=0.06 if few else 0.12, color="black",
+                                         linestyle=["-", (0, (1, 1)), "-."][i % 3], marker="o", markersize=3, label=label)  # fmt: skip
+                drawn.append(data)
+                entries.append(((0, i, 0), label, line))
+        for j, series in enumerate(own_series):
+            for k, gamma in enumerate(gammas):
+                points = [
+                    (s, cells[(env, variant, series, s, gamma)])
+                    for s in steps
+                    if (env, variant, series, s, gamma) in cells
+                ]
+                if not points:
+                    continue
+                label = f"γ = {gamma:g}" + (f" [{series}]" if series else "")
+                line, data = plot_series(ax, dodge([p[0] for p in points], k, len(gammas), spacing), [p[1] for p in points],
+                                         errorbars=not few, band_alpha=0.04 if few else 0.08,
+                                         color=gamma_colour(gamma, kind), marker=gamma_marker(gamma, kind),
+                                         linestyle=styles[j % len(styles)], markersize=3, linewidth=1.2,
+                                         label=label)  # fmt: skip
+                drawn.append(data)
+                entries.append(((1, j, -gamma), label, line))  # the paper's legend: highest γ first
+        any_clipped |= set_y_range(ax, env, drawn, few)
+        style_axis(ax, panel_title(env, env_rows), "training steps", "return", steps_on_x=True)
+    if any_clipped:
+        entries.append(((2, 0, 0), clipped_handle().get_label(), clipped_handle()))
+    name = paper_name(variant)
+    what = (
+        "PPO checkpoints evaluated at each guidance γ (not in the paper)"
+        if variant == "ppo"
+        else f"{name}: evaluated at each guidance γ"
+    )
+    fig.suptitle(title or what, fontsize=10)
+    legend_right(fig, entries, "mean ± 95% CI over seeds")
+    return fig
+
+
+def gamma_response(summary, envs, step):
+    """Return against eval γ at one step (default: each env's last), one line per variant in its colour
+    and marker (several configurations of one variant by line style), the y-axis within the task's
+    possible return like every figure (set_y_range)."""
+    fig, axes = panels(len(envs))
+    entries, any_clipped = [], False
+    for ax, env in zip(axes, envs):
+        env_rows = [r for r in summary if r["env_id"] == env]
+        at = step if step is not None else max(int(r["step"]) for r in env_rows)
+        few = few_seeds(env_rows)
+        drawn = []
+        for variant, series in ordered_series(env_rows):
+            points = sorted((r for r in env_rows if r["variant"] == variant and r["series"] == series and int(r["step"]) == at),
+                            key=lambda r: float(r["eval_guidance"]))  # fmt: skip
+            if points:
+                label = series_name(variant, series)
+                style = LINE_STYLES[[s for v, s in ordered_series(env_rows) if v == variant].index(series) % 4]
+                line, data = plot_series(ax, [float(r["eval_guidance"]) for r in points], points, errorbars=not few,
+                                         band_alpha=0.06 if few else 0.12, marker=MARKERS[variant_rank(variant)],
+                                         markersize=3, color=variant_colour(variant), linestyle=style,
+                                         label=label)  # fmt: skip
+                drawn.append(data)
+                entries.append(((variant_rank(variant), variant, series), label, line))
+        ax.set_xscale("log")
+        # Ticks at the swept γ only: over 1–1.5 a log axis otherwise labels its minor ticks in ×10⁰ form.
+        swept = sorted({float(r["eval_guidance"]) for r in env_rows})
+        ax.set_xticks(swept, labels=[f"{g:g}" for g in swept])
+        ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
+        if len(swept) > 6:
+            plt.setp(ax.get_xticklabels(), rotation=45)
+        any_clipped |= set_y_range(ax, env, drawn, few)
+        extra, code = panel_notes([r for r in env_rows if int(r["step"]) == at], sep="\n")
+        title = f"{env} at {step_label(at)} steps\n{extra}" + (f"\n{code}" if code else "")
+        style_axis(ax, title, "eval guidance γ", "return", steps_on_x=False)
+    if any_clipped:
+        entries.append(((9, "", ""), clipped_handle().get_label(), clipped_handle()))
+    legend_right(fig, entries, "training variant")
+    return fig
+
+
+def run_config(run_args: dict, siblings: list[dict]) -> str:
+    """The arguments in which a run differs from other runs of its env and variant (seed aside)."""
+    keys = sorted({k for a in siblings for k in a} - NOT_CONFIG_ARGS)
+    differing = [k for k in keys if len({json.dumps(a.get(k), sort_keys=True) for a in siblings}) > 1]
+    return " ".join(f"{k}={run_args.get(k, 'default')}" for k in differing)
+
+
+def learning_curves(args_files, bins: int = 50, min_points: int = 5):
+    """Episodic training return (TensorBoard charts/episodic_return), binned over steps, per variant
+    and configuration: mean over seeds of each seed's bin mean, with the t 95% CI, from the runs whose
+    args.json files are given. Draws whatever points exist and says so in the panel when they are too
+    few for a curve."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    runs, run_dirs = [], []
+    for args_file in args_files:
+        run_args = json.loads(args_file.read_text())
+        accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
+        accumulator.Reload()
+        if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
+            continue
+        events = accumulator.Scalars("charts/episodic_return")
+        variant = variant_id(run_args["guidance"], run_args["cond_dropout"])
+        runs.append((run_args, variant, np.array([e.step for e in events]), np.array([e.value for e in events])))
+        run_dirs.append(args_file.parent)
+    if not runs:
+        raise InputError(f"no TensorBoard episodic returns in the events of {len(args_files)} runs")
+    siblings = defaultdict(list)
+    for run_args, variant, _, _ in runs:
+        siblings[(run_args["env_id"], variant)].append(run_args)
+    curves = defaultdict(list)  # (env, variant, config label) -> [(steps, returns)] per seed
+    seen = {}  # (env, variant, config label, seed) -> run directory: one seed is one run
+    for (run_args, variant, steps, returns), run_dir in zip(runs, run_dirs):
+        label = run_config(run_args, siblings[(run_args["env_id"], variant)])
+        first = seen.setdefault((run_args["env_id"], variant, label, run_args["seed"]), run_dir)
+        if first != run_dir:
+            raise InputError(f"two runs of one configuration and seed {run_args['seed']}: {first} and {run_dir} "
+                             "(e.g. runs of two roots or MuJoCo versions); plot them apart")  # fmt: skip
+        curves[(run_args["env_id"], variant, label)].append((steps, returns))
+    envs = sorted({env for env, _, _ in curves})
+    fig, axes = panels(len(envs))
+    for ax, env in zip(axes, envs):
+        drawn, notes = [], []
+        of_env = [((v, label), seeds) for (e, v, label), seeds in curves.items() if e == env]
+        for (variant, label), seeds in sorted(of_env, key=lambda kv: (variant_rank(kv[0][0]), kv[0])):
+            style = LINE_STYLES[[lb for (v, lb), _ in of_env if v == variant].index(label) % 4]
+            edges = np.linspace(0, max(s.max() for s, _ in seeds) + 1, bins + 1)
+            per_seed = np.array([[r[(s >= lo) & (s < hi)].mean() if ((s >= lo) & (s < hi)).any() else np.nan
+                                  for lo, hi in itertools.pairwise(edges)] for s, r in seeds])  # fmt: skip
+            centres = (edges[:-1] + edges[1:]) / 2
+            present = ~np.isnan(per_seed).all(axis=0)
+            stats_per_bin = [mean_ci95(col[~np.isnan(col)]) for col in per_seed.T[present]]
+            banded = len(seeds) >= 3  # with 2 seeds t_{0.975,1} = 12.7: a band would cover the panel
+            rows = [{"mean": m, "ci95": h if banded else 0.0} for m, h, _, _ in stats_per_bin]
+            name = series_name(variant, label) + f" (n={len(seeds)}{'' if banded else ', no CI band'})"
+            few = present.sum() < min_points
+            _, data = plot_series(ax, centres[present], rows, errorbars=False, band_alpha=0.1 if len(seeds) > 2 else 0.05,
+                                  color=variant_colour(variant), linestyle=style, linewidth=1,
+                                  marker="o" if few else None, markersize=3, label=name)  # fmt: skip
+            drawn.append(data)
+            if few:
+                count = int(present.sum())
+                notes.append(f"{series_name(variant, label)}: only {count} point{'' if count == 1 else 's'}")
+        clipped = set_y_range(
+            ax, env, drawn, few=min(len(seeds) for (e, _, _), seeds in curves.items() if e == env) < 3
+        )
+        style_axis(ax, env, "training steps", "episodic return", steps_on_x=True)
+        handles, labels = ax.get_legend_handles_labels()
+        if clipped:
+            handles.append(clipped_handle())
+            labels.append("CI clipped")
+        ax.legend(handles, labels, fontsize=6, frameon=False)
+        if notes:
+            ax.text(0.02, 0.02, "too few points for a curve:\n" + "\n".join(notes), transform=ax.transAxes, fontsize=6,
+                    va="bottom", color="0.3")  # fmt: skip
+    return fig
