@@ -50,12 +50,16 @@ Writes into --output (and prints each path):
 """
 
 import csv
+import json
 import math
 import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib
+
+matplotlib.use("Agg")  # files only, never a display; before pgg_utils.figures imports pyplot
 import numpy as np
 import tyro
 from scipy import stats
@@ -65,13 +69,15 @@ from pgg_utils.agreement import (
     REFERENCE_MUJOCO,
     compare_with_paper,
     comparison_markdown,
+    other_mujoco,
     series_id,
     step_label,
     task_summaries,
 )
-from pgg_utils.figures import cell_index, ordered_series, other_mujoco
+from pgg_utils.arguments import RUN_ONLY_ARGS
+from pgg_utils.figures import cell_index, ordered_series
 from pgg_utils.files import MANIFEST, InputError, read_csv, read_manifest, remove_stale, write_atomic, write_manifest
-from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_rank
+from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id, variant_rank
 from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 
@@ -79,6 +85,9 @@ ROOT = Path(__file__).resolve().parent
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
                     "null_branch", "seed", "return"}  # fmt: skip
 KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
+# Run arguments that do not change what is trained (or only its bits; pgg_utils.arguments names them),
+# and the seed: never part of a configuration.
+NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 # The eval γ a paper figure draws where it is fewer than its table's (its continuous dropout figure: 1.0-1.2).
 # Our figure of that variant draws the same range; the other swept γ go to fig_<kind>_<variant>_beyond_paper.
 PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}
@@ -119,11 +128,12 @@ def sweep_csv(raw: str) -> Path:
 
 
 def run_args_files(run_paths) -> list[Path]:
-    files = []
+    """The args.json of each run: a folder holding one is a run, any other folder every run below it."""
+    found = []
     for raw in run_paths:
         path = Path(raw)
-        files.extend([path / "args.json"] if (path / "args.json").is_file() else sorted(path.rglob("args.json")))
-    return files
+        found.extend([path / "args.json"] if (path / "args.json").is_file() else sorted(path.rglob("args.json")))
+    return found
 
 
 def validate(args: Args) -> None:
@@ -307,6 +317,50 @@ def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
         return config_tokens(config)["mujoco"]
     versions = {provenance_entry(provenance, s).get("mujoco", "") for s in sources} if provenance else set()
     return "/".join(sorted(v for v in versions if v))
+
+
+# --- training curves (--runs) ---------------------------------------------------------------------
+
+
+def run_config(run_args: dict, siblings: list[dict]) -> str:
+    """The arguments in which a run differs from other runs of its env and variant (seed aside)."""
+    keys = sorted({k for a in siblings for k in a} - NOT_CONFIG_ARGS)
+    differing = [k for k in keys if len({json.dumps(a.get(k), sort_keys=True) for a in siblings}) > 1]
+    return " ".join(f"{k}={run_args.get(k, 'default')}" for k in differing)
+
+
+def training_curves(run_paths) -> dict:
+    """{(env, variant, configuration label): [(steps, returns) per seed]}: the episodic training returns
+    (TensorBoard charts/episodic_return) of the runs under `run_paths`, labelled as the sweeps' configurations
+    are (only the arguments in which runs of one env and variant differ)."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    runs, run_dirs = [], []
+    for args_file in run_args_files(run_paths):
+        run_args = json.loads(args_file.read_text())
+        accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
+        accumulator.Reload()
+        if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
+            continue
+        events = accumulator.Scalars("charts/episodic_return")
+        variant = variant_id(run_args["guidance"], run_args["cond_dropout"])
+        runs.append((run_args, variant, np.array([e.step for e in events]), np.array([e.value for e in events])))
+        run_dirs.append(args_file.parent)
+    if not runs:
+        raise InputError(f"no TensorBoard episodic returns under {', '.join(run_paths)}")
+    siblings = defaultdict(list)
+    for run_args, variant, _, _ in runs:
+        siblings[(run_args["env_id"], variant)].append(run_args)
+    curves = defaultdict(list)  # (env, variant, config label) -> [(steps, returns)] per seed
+    seen = {}  # (env, variant, config label, seed) -> run directory: one seed is one run
+    for (run_args, variant, steps, returns), run_dir in zip(runs, run_dirs):
+        label = run_config(run_args, siblings[(run_args["env_id"], variant)])
+        first = seen.setdefault((run_args["env_id"], variant, label, run_args["seed"]), run_dir)
+        if first != run_dir:
+            raise InputError(f"two runs of one configuration and seed {run_args['seed']}: {first} and {run_dir} "
+                             "(e.g. runs of two roots or MuJoCo versions); plot them apart")  # fmt: skip
+        curves[(run_args["env_id"], variant, label)].append((steps, returns))
+    return curves
 
 
 # --- provenance -----------------------------------------------------------------------------------
@@ -644,7 +698,7 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     write_csv(output / "aggregate_iqm.csv", aggregate, written)
     write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
     if args.runs:
-        save_figure(figures.learning_curves(run_args_files(args.runs)), output / "learning_curves", written)
+        save_figure(figures.learning_curves(training_curves(args.runs)), output / "learning_curves", written)
     if args.compare_paper:
         comparison = compare_with_paper(summary)
         tasks = task_summaries(comparison, summary)

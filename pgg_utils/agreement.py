@@ -54,6 +54,11 @@ def series_id(variant: str, series: str) -> str:
     return variant + (f" [{series}]" if series else "")
 
 
+def other_mujoco(row: dict | None) -> bool:
+    """Whether a cell comes from a MuJoCo other than the tables' (it is marked † and named in titles)."""
+    return bool(row and row.get("mujoco") and row["mujoco"] != REFERENCE_MUJOCO)
+
+
 # --- the tests ------------------------------------------------------------------------------------
 
 
@@ -358,9 +363,7 @@ def comparison_markdown(rows: list[dict], summary: list[dict], tasks: list[dict]
               "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for r in paper_rows:
         mark = " ✗" if r["significant"] == "True" else ""
-        variant = series_id(r["variant"], r["series"]) + (
-            "†" if r["mujoco"] and r["mujoco"] != REFERENCE_MUJOCO else ""
-        )
+        variant = series_id(r["variant"], r["series"]) + ("†" if other_mujoco(r) else "")
         lines.append(f"| {r['env_id']} | {variant} | {step_label(r['step'])} | {r['eval_guidance']:g} | "
                      f"{fmt(r['ref_mean'])} ± {fmt(r['ref_ci95'])} | {fmt(r['our_mean'])} ± {fmt(r['our_ci95'])} | "
                      f"{r['our_n']} | {r['diff']:+.1f} | {fmt(r['diff_pct'])} | {fmt_p(r['p'])} | {fmt_p(r['p_holm'])}{mark} | "

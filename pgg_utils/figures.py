@@ -1,36 +1,28 @@
 """The figures of plot_results.py, drawn from its summary rows (one row per configuration, step and
 eval γ; plot_results.summarise), in one palette: one colour per training variant, one colour and marker
-per eval γ, the y-axis never past a task's possible return. Each function returns a matplotlib figure;
-plot_results writes it. No torch."""
+per eval γ, the y-axis never past a task's possible return. figure_for_variant, gamma_response and
+learning_curves each return a figure; render turns one into PNG and PDF bytes, which plot_results writes.
+No torch; the matplotlib backend is the caller's (plot_results sets Agg)."""
 
 import io
 import itertools
-import json
 import math
 import zlib
-from collections import defaultdict
 
-import matplotlib
-
-matplotlib.use("Agg")
 import matplotlib.colors
+import matplotlib.figure
 import matplotlib.lines
 import matplotlib.pyplot as plt
 import matplotlib.ticker
 import numpy as np
 
-from pgg_utils.agreement import REFERENCE_MUJOCO, step_label
-from pgg_utils.arguments import RUN_ONLY_ARGS
-from pgg_utils.files import InputError
-from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_id, variant_rank
+from pgg_utils.agreement import other_mujoco, step_label
+from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank
 from pgg_utils.stats import mean_ci95
 
 # The possible return of a task, where it has one: axes never extend past it.
 RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
                 "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
-# Run arguments that do not change what is trained (or only its bits; pgg_utils.arguments names them),
-# and the seed: never part of a configuration.
-NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 MARKERS = "osD^vPX*hp<>"
 # The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
 # variants fixed, any other a fixed colour of its name) and one per eval γ (viridis by the γ's place in
@@ -55,11 +47,6 @@ def cell_index(summary: list[dict]) -> dict:
     return {(r["env_id"], r["variant"], r["series"], int(r["step"]), float(r["eval_guidance"])): r for r in summary}
 
 
-def other_mujoco(row: dict | None) -> bool:
-    """Whether a cell comes from a MuJoCo other than the tables' (it is marked † and named in titles)."""
-    return bool(row and row.get("mujoco") and row["mujoco"] != REFERENCE_MUJOCO)
-
-
 # --- drawing -------------------------------------------------------------------------------------
 
 
@@ -76,6 +63,7 @@ def render(fig) -> dict[str, bytes]:
 
 
 def panels(n: int, cols: int | None = None):
+    """A figure of `n` panels, `cols` (default up to 3) to a row, the grid's spare axes hidden."""
     cols = cols or min(n, 3)
     rows = math.ceil(n / cols)
     size = (4.4, 3.2) if n == 1 else (3.4 * cols, 2.7 * rows)  # a lone panel next to a legend needs room
@@ -213,6 +201,7 @@ def gamma_colour(gamma: float, kind: str) -> str:
 
 
 def few_seeds(rows) -> bool:
+    """Fewer than 3 seeds: with t_{0.975,1} = 12.7 a CI band would dwarf the means."""
     return min(int(r["n_seeds"]) for r in rows) < 3
 
 
@@ -335,7 +324,9 @@ def gamma_response(summary, envs, step):
                             key=lambda r: float(r["eval_guidance"]))  # fmt: skip
             if points:
                 label = series_name(variant, series)
-                style = LINE_STYLES[[s for v, s in ordered_series(env_rows) if v == variant].index(series) % 4]
+                style = LINE_STYLES[
+                    [s for v, s in ordered_series(env_rows) if v == variant].index(series) % len(LINE_STYLES)
+                ]
                 line, data = plot_series(ax, [float(r["eval_guidance"]) for r in points], points, errorbars=not few,
                                          band_alpha=0.06 if few else 0.12, marker=MARKERS[variant_rank(variant)],
                                          markersize=3, color=variant_colour(variant), linestyle=style,
@@ -359,52 +350,18 @@ def gamma_response(summary, envs, step):
     return fig
 
 
-def run_config(run_args: dict, siblings: list[dict]) -> str:
-    """The arguments in which a run differs from other runs of its env and variant (seed aside)."""
-    keys = sorted({k for a in siblings for k in a} - NOT_CONFIG_ARGS)
-    differing = [k for k in keys if len({json.dumps(a.get(k), sort_keys=True) for a in siblings}) > 1]
-    return " ".join(f"{k}={run_args.get(k, 'default')}" for k in differing)
-
-
-def learning_curves(args_files, bins: int = 50, min_points: int = 5):
-    """Episodic training return (TensorBoard charts/episodic_return), binned over steps, per variant
-    and configuration: mean over seeds of each seed's bin mean, with the t 95% CI, from the runs whose
-    args.json files are given. Draws whatever points exist and says so in the panel when they are too
-    few for a curve."""
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    runs, run_dirs = [], []
-    for args_file in args_files:
-        run_args = json.loads(args_file.read_text())
-        accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
-        accumulator.Reload()
-        if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
-            continue
-        events = accumulator.Scalars("charts/episodic_return")
-        variant = variant_id(run_args["guidance"], run_args["cond_dropout"])
-        runs.append((run_args, variant, np.array([e.step for e in events]), np.array([e.value for e in events])))
-        run_dirs.append(args_file.parent)
-    if not runs:
-        raise InputError(f"no TensorBoard episodic returns in the events of {len(args_files)} runs")
-    siblings = defaultdict(list)
-    for run_args, variant, _, _ in runs:
-        siblings[(run_args["env_id"], variant)].append(run_args)
-    curves = defaultdict(list)  # (env, variant, config label) -> [(steps, returns)] per seed
-    seen = {}  # (env, variant, config label, seed) -> run directory: one seed is one run
-    for (run_args, variant, steps, returns), run_dir in zip(runs, run_dirs):
-        label = run_config(run_args, siblings[(run_args["env_id"], variant)])
-        first = seen.setdefault((run_args["env_id"], variant, label, run_args["seed"]), run_dir)
-        if first != run_dir:
-            raise InputError(f"two runs of one configuration and seed {run_args['seed']}: {first} and {run_dir} "
-                             "(e.g. runs of two roots or MuJoCo versions); plot them apart")  # fmt: skip
-        curves[(run_args["env_id"], variant, label)].append((steps, returns))
+def learning_curves(curves: dict, bins: int = 50, min_points: int = 5) -> matplotlib.figure.Figure:
+    """Episodic training return against steps, one panel per env, from `curves` ({(env, variant,
+    configuration label): [(steps, returns) per seed]}, plot_results.training_curves): per variant and
+    configuration the mean over seeds of each seed's mean in each of `bins` step bins, with the t 95% CI.
+    Draws whatever points exist and says so in the panel when they are too few for a curve."""
     envs = sorted({env for env, _, _ in curves})
     fig, axes = panels(len(envs))
     for ax, env in zip(axes, envs):
         drawn, notes = [], []
         of_env = [((v, label), seeds) for (e, v, label), seeds in curves.items() if e == env]
         for (variant, label), seeds in sorted(of_env, key=lambda kv: (variant_rank(kv[0][0]), kv[0])):
-            style = LINE_STYLES[[lb for (v, lb), _ in of_env if v == variant].index(label) % 4]
+            style = LINE_STYLES[[lb for (v, lb), _ in of_env if v == variant].index(label) % len(LINE_STYLES)]
             edges = np.linspace(0, max(s.max() for s, _ in seeds) + 1, bins + 1)
             per_seed = np.array([[r[(s >= lo) & (s < hi)].mean() if ((s >= lo) & (s < hi)).any() else np.nan
                                   for lo, hi in itertools.pairwise(edges)] for s, r in seeds])  # fmt: skip

@@ -615,12 +615,13 @@ def test_learning_curves_draw_few_points_and_say_so(sweep_dir, tmp_path):
         for step, value in ((512, 20.0 + seed), (1024, 40.0 + seed)):  # episodes logged at two steps only
             writer.add_scalar("charts/episodic_return", value, step)
         writer.close()
-    fig = figures.learning_curves(plots.run_args_files([str(tmp_path / "runs")]))
+    fig = figures.learning_curves(plots.training_curves([str(tmp_path / "runs")]))
     ax = fig.axes[0]
     line = next(line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)")
     assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
     assert line.get_color() == figures.variant_colour("pgg_g1.1")  # the variant's colour in every figure
     assert any("too few points" in t.get_text() and "only 2 points" in t.get_text() for t in ax.texts)
+    matplotlib.pyplot.close(fig)
     written = generate(sweep_dir, tmp_path, runs=(str(tmp_path / "runs"),))
     assert tmp_path / "out" / "learning_curves.png" in written
 
@@ -735,7 +736,20 @@ def test_learning_curves_never_count_one_seed_twice(tmp_path):
         writer.add_scalar("charts/episodic_return", 20.0, 512)
         writer.close()
     with pytest.raises(plots.InputError, match="two runs of one configuration and seed 1"):
-        figures.learning_curves(plots.run_args_files([str(tmp_path / "a"), str(tmp_path / "b")]))
+        plots.training_curves([str(tmp_path / "a"), str(tmp_path / "b")])
+
+
+def test_runs_without_episodic_returns_are_one_error_naming_where(tmp_path):
+    from torch.utils.tensorboard import SummaryWriter
+
+    run = tmp_path / "runs" / "CartPole-v1__ppo__s1"
+    run.mkdir(parents=True)
+    (run / "args.json").write_text('{"env_id": "CartPole-v1", "guidance": 1.0, "cond_dropout": 0.0, "seed": 1}')
+    writer = SummaryWriter(str(run))
+    writer.add_scalar("losses/value_loss", 1.0, 512)  # a run that logged no episode
+    writer.close()
+    with pytest.raises(plots.InputError, match=f"no TensorBoard episodic returns under {tmp_path / 'runs'}"):
+        plots.training_curves([str(tmp_path / "runs")])
 
 
 PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"
