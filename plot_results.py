@@ -335,7 +335,7 @@ def training_curves(run_paths) -> dict:
     are (only the arguments in which runs of one env and variant differ)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    runs, run_dirs = [], []
+    runs = []  # (run arguments, variant, steps, returns, run directory)
     for args_file in run_args_files(run_paths):
         run_args = json.loads(args_file.read_text())
         accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
@@ -344,16 +344,16 @@ def training_curves(run_paths) -> dict:
             continue
         events = accumulator.Scalars("charts/episodic_return")
         variant = variant_id(run_args["guidance"], run_args["cond_dropout"])
-        runs.append((run_args, variant, np.array([e.step for e in events]), np.array([e.value for e in events])))
-        run_dirs.append(args_file.parent)
+        steps, returns = np.array([e.step for e in events]), np.array([e.value for e in events])
+        runs.append((run_args, variant, steps, returns, args_file.parent))
     if not runs:
         raise InputError(f"no TensorBoard episodic returns under {', '.join(run_paths)}")
     siblings = defaultdict(list)
-    for run_args, variant, _, _ in runs:
+    for run_args, variant, *_ in runs:
         siblings[(run_args["env_id"], variant)].append(run_args)
     curves = defaultdict(list)  # (env, variant, config label) -> [(steps, returns)] per seed
     seen = {}  # (env, variant, config label, seed) -> run directory: one seed is one run
-    for (run_args, variant, steps, returns), run_dir in zip(runs, run_dirs):
+    for run_args, variant, steps, returns, run_dir in runs:
         label = run_config(run_args, siblings[(run_args["env_id"], variant)])
         first = seen.setdefault((run_args["env_id"], variant, label, run_args["seed"]), run_dir)
         if first != run_dir:
