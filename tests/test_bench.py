@@ -1,3 +1,4 @@
+import csv
 import json
 import subprocess
 import sys
@@ -165,3 +166,40 @@ def test_same_training_cpu_tells_bit_identical_weights_from_a_difference_of_one_
     (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
     with pytest.raises(same_training_cpu.InputError, match="junk.pt: unreadable checkpoint"):
         same_training_cpu.compare_weights(shipped, tmp_path / "junk.pt")
+
+
+def test_same_episodes_finds_a_return_one_ulp_off_a_missing_episode_and_skips_unrecorded_columns(tmp_path):
+    import math
+
+    import same_episodes
+
+    columns = ["run", "step", "eval_guidance", "policy", "null_branch", "episode_seed", "return", "length", "torch"]
+    table = [dict(zip(columns, ["Hopper-v4__ppo__s1", "200000", "1.0", "sample", "learned", str(10000 + k),
+                                repr(100.0 + k / 3), "1000", ""], strict=True)) for k in range(3)]  # fmt: skip
+    sweep = [dict(row, torch="2.13.0+cpu") for row in table]
+    for name, rows in (("table.csv", table), ("sweep.csv", sweep)):
+        with open(tmp_path / name, "w", newline="") as f:
+            writer = csv.DictWriter(f, columns)
+            writer.writeheader()
+            writer.writerows(rows)
+    assert same_episodes.compare(table, sweep) == ([], {"torch"}, 3)
+
+    off = [dict(row) for row in sweep]
+    off[1]["return"] = repr(math.nextafter(float(off[1]["return"]), math.inf))
+    off[2]["eval_guidance"] = "1.5"
+    problems, _, identical = same_episodes.compare(table, off)
+    assert identical == 1 and len(problems) == 2
+    assert problems[0].startswith("Hopper-v4__ppo__s1 step 200000 γ 1.0 episode seed 10001: return ")
+    assert problems[1].startswith("not in the table")
+
+    script = str(ROOT / "benchmarks" / "same_episodes.py")
+    same = subprocess.run([sys.executable, script, str(tmp_path / "table.csv"), str(tmp_path / "sweep.csv")],
+                          capture_output=True, text=True)  # fmt: skip
+    assert same.returncode == 0, same.stderr
+    assert "3 of 3 episodes identical to the table's in every field; empty on one side, not compared: torch\n" in (
+        same.stdout
+    )
+    (tmp_path / "foreign.csv").write_text("a,b\n1,2\n")
+    bad = subprocess.run([sys.executable, script, str(tmp_path / "table.csv"), str(tmp_path / "foreign.csv")],
+                         capture_output=True, text=True)  # fmt: skip
+    assert bad.returncode == 2 and bad.stderr.startswith("error: ") and bad.stderr.count("\n") == 1
