@@ -11,7 +11,6 @@ columns of sweeps older than them) is named and not compared. Exit status 0 when
 sweeps is in the table, identical; 1 when one is missing or differs; 2 for unreadable input.
 """
 
-import csv
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,7 @@ from pathlib import Path
 import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from pgg_utils.files import InputError, one_line_errors
+from pgg_utils.files import InputError, one_line_errors, read_csv
 
 KEY = ("run", "step", "eval_guidance", "policy", "null_branch", "episode_seed")
 SHOWN = 5  # differences printed in full; the rest are counted
@@ -38,17 +37,16 @@ def key(row: dict) -> tuple:
             int(row["episode_seed"]))  # fmt: skip
 
 
-def read(path: str) -> tuple[list[str], list[dict]]:
+def read(path: str) -> list[dict]:
     try:
-        with open(path, newline="") as f:
-            reader = csv.DictReader(f)
-            rows = list(reader)
-            columns = list(reader.fieldnames or [])
+        rows = read_csv(Path(path))
     except OSError as e:
         raise InputError(f"{path}: {e.strerror}") from None
-    if missing := [c for c in KEY if c not in columns]:
+    if not rows:
+        raise InputError(f"{path} holds no episodes")
+    if missing := [c for c in KEY if c not in rows[0]]:
         raise InputError(f"{path} is no sweep's episodes.csv: it lacks {', '.join(missing)}")
-    return columns, rows
+    return rows
 
 
 def compare(table: list[dict], sweep: list[dict]) -> tuple[list[str], set[str], int]:
@@ -79,12 +77,10 @@ def compare(table: list[dict], sweep: list[dict]) -> tuple[list[str], set[str], 
 def main() -> None:
     args = tyro.cli(Args)
     with one_line_errors():
-        _, table = read(args.table)
+        table = read(args.table)
         same = True
         for path in args.sweeps:
-            _, sweep = read(path)
-            if not sweep:
-                raise InputError(f"{path} holds no episodes")
+            sweep = read(path)
             problems, unrecorded, identical = compare(table, sweep)
             skipped = f"; empty on one side, not compared: {', '.join(sorted(unrecorded))}" if unrecorded else ""
             print(f"{path}: {identical:,} of {len(sweep):,} episodes identical to the table's in every field"
