@@ -58,18 +58,16 @@ import ppo_pgg_discrete
 from pgg_utils import runs
 from pgg_utils.arguments import guidance_error
 from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
+from pgg_utils.fast import MIN_FORWARD_ROWS
 from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, write_csv_atomic
-from pgg_utils.paper import PAPER_GAMMAS, REFERENCE_ARGS, is_mujoco, variant_id
+from pgg_utils.identity import config_label, run_identity
+from pgg_utils.paper import PAPER_GAMMAS
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
 from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 from pgg_utils.video import labelled, write_video
 
-# Policy forwards run on at least this many rows (padded). CPU BLAS rounds a 1-3 row product differently
-# from a larger one, so the one-row sequential reference pads to it; on the AMD EPYC this was written on,
-# products of 8 or more rows round alike, and the reference equals the cells to the bit there.
-MIN_FORWARD_ROWS = 8
 SUMMARY_COLUMNS = [
     "env_id", "variant", "config", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy", "null_branch",
     "n_seeds", "n_episodes", "mean", "ci95", "ci_low", "ci_high", "ci_method", "seed_means",
@@ -135,119 +133,25 @@ def load_any_checkpoint(path: Path):
     return TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, path), ckpt
 
 
-VARIANT_ARGS = frozenset({"guidance", "cond_dropout"})  # named by the variant, the label's first word
-
-
-def format_arg(value) -> str:
-    return repr(value) if isinstance(value, float) else str(value)
-
-
-def config_label(ckpt: dict) -> str:
-    """The training configuration of a checkpoint, as a readable label: the variant, then `key=value`
-    for every training argument that differs from the frozen reference of its kind (REFERENCE_ARGS,
-    sorted by name); then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown`
-    where the checkpoint records no package versions (format 1), so that it is never pooled with runs
-    whose stack is known. Against frozen data, not the training scripts' current defaults: changing a
-    default neither renames nor splits an experiment. Arguments missing from an old checkpoint count
-    as the reference's; arguments the reference lacks (env_id, seed, how the run was recorded) are
-    left out, and so is the revision of the training code, which changes with every commit.
-    E.g. `pgg_g1.1 learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`."""
-    reference, train_args = REFERENCE_ARGS[ckpt["action_space"]], ckpt["args"]
-    words = [variant_id(train_args["guidance"], train_args["cond_dropout"])]
-    for key in sorted(reference.keys() - VARIANT_ARGS):
-        value = train_args.get(key, reference[key])
-        if value != reference[key]:
-            words.append(f"{key}={format_arg(value)}")
-    versions = ckpt.get("versions")
-    if not versions:
-        words.append("versions=unknown")
-    elif versions.get("mujoco") and is_mujoco(ckpt["env_id"]):
-        words.append(f"mujoco={versions['mujoco']}")
-    return " ".join(words)
-
-
-# --- the batched guided policy ---------------------------------------------------------------------
-
-
 class GuidedPolicy:
-    """The guided policy of one checkpoint, evaluated for a batch of raw observations with one
-    guidance strength per row. The unconditional branch is computed once, here.
-
-    The conditional branch is the checkpoint's actor in torch, its Linear layers called directly on
-    detached weights (the same operations as `agent.actor(x)`, without nn.Module's per-call cost and
-    autograd's bookkeeping); guidance, noise, clipping and argmax are then elementwise float32 numpy,
-    the same IEEE operations torch would do."""
+    """The guided policy of one checkpoint for the sweep: its agent's own `act`, the path every user of
+    a trained agent takes, with the unconditional branch computed once (or, for the discrete
+    uniform-null control, zeros). Where the null embedding replaces chosen dimensions only, the
+    unconditional branch depends on the observation and `act` computes it per row."""
 
     def __init__(self, agent, ckpt: dict, uniform_null: bool = False):
         self.agent, self.kind = agent, ckpt["action_space"]
-        mlp = agent.actor if self.kind == "discrete" else agent.actor_mean
-        self.in_features = next(m.in_features for m in mlp if isinstance(m, torch.nn.Linear))
-        # (weight, bias) of each Linear layer, None for each Tanh: the agents' MLPs have nothing else
-        self.layers = [(m.weight.detach(), m.bias.detach()) if isinstance(m, torch.nn.Linear) else None for m in mlp]
         with torch.no_grad():
             if self.kind == "discrete":
-                learned = agent.unconditional_logits()
-                self.null = torch.zeros_like(learned) if uniform_null else learned
+                learned = agent.unconditional_logits().numpy()
+                self.null = {"logits_null": np.zeros_like(learned) if uniform_null else learned}
             else:
-                self.null = agent.unconditional_mean()
-                self.std = agent.actor_logstd.exp()[0]
-                # The environment's own bounds, which training clipped actions to. Not the checkpoint's
-                # copy: checkpoints saved before 2026-11-22 hold ClipAction's ±inf there, and MuJoCo
-                # tasks charge their control cost on the action as given.
-                probe = make_eval_env(ckpt)
-                self.low = torch.as_tensor(probe.action_space.low, dtype=torch.float32)
-                self.high = torch.as_tensor(probe.action_space.high, dtype=torch.float32)
-                probe.close()
-        self.null_np = self.null.numpy()
-        if self.kind != "discrete":
-            self.std_np, self.low_np, self.high_np = self.std.numpy(), self.low.numpy(), self.high.numpy()
+                self.null = {"mean_null": agent.unconditional_mean().numpy()}
 
-    def conditional(self, raw_obs: np.ndarray) -> np.ndarray:
-        """The conditional branch (logits or means), float32, one row per observation.
-
-        The forward runs on at least MIN_FORWARD_ROWS rows (padded with copies of the first), and its
-        input lies in memory that torch allocated (64-byte aligned), so that the shapes and the
-        alignment of every product are a function of the row count alone. A row's result depends on
-        its own values, the row count and its position in the batch, never on the other rows'
-        values (no matrix product mixes rows)."""
-        rows = len(raw_obs)
-        x = torch.empty(max(rows, MIN_FORWARD_ROWS), self.in_features)
-        view = x.numpy()
-        view[:rows] = raw_obs if self.kind == "discrete" else self.agent.obs_norm(raw_obs).numpy()
-        view[rows:] = view[0]
-        for layer in self.layers:
-            x = torch.tanh(x) if layer is None else torch.nn.functional.linear(x, *layer)
-        return x.numpy()[:rows]
-
-    @staticmethod
-    def coefficients(guidance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The float32 weights (1 - γ, γ) of the two branches, one row per observation."""
-        guidance = np.asarray(guidance, dtype=np.float64)[:, None]
-        return (1.0 - guidance).astype(np.float32), guidance.astype(np.float32)
-
-    def guided_numpy(self, raw_obs: np.ndarray, guidance: np.ndarray, coefficients=None) -> np.ndarray:
-        coef_null, coef_cond = coefficients or self.coefficients(guidance)
-        return coef_null * self.null_np + coef_cond * self.conditional(raw_obs)
-
-    def guided(self, raw_obs: np.ndarray, guidance: np.ndarray) -> torch.Tensor:
-        """Guided logits (discrete) or guided means (continuous), one row per observation."""
-        return torch.from_numpy(self.guided_numpy(raw_obs, guidance))
-
-    def act(self, raw_obs: np.ndarray, guidance: np.ndarray, noise: np.ndarray, deterministic: bool,
-            coefficients=None) -> np.ndarray:  # fmt: skip
-        """Actions for a batch; `noise` holds one row of episode_noise per observation: standard
-        Gumbel noise per action (discrete) or standard normal noise per action dimension
-        (continuous), used unless deterministic. `coefficients`: self.coefficients(guidance), where
-        the caller has them."""
-        guided = self.guided_numpy(raw_obs, guidance, coefficients)
-        noise = np.asarray(noise, dtype=np.float32)
-        if self.kind == "discrete":
-            if not deterministic:
-                guided += noise
-            return guided.argmax(-1)
-        if not deterministic:
-            guided += self.std_np * noise
-        return np.maximum(np.minimum(guided, self.high_np), self.low_np)
+    def act(self, raw_obs: np.ndarray, guidance: np.ndarray, noise: np.ndarray, deterministic: bool) -> np.ndarray:
+        """Actions for a batch, one guidance strength per row; `noise` holds one row of episode_noise
+        per observation, used unless deterministic."""
+        return self.agent.act(raw_obs, guidance, deterministic, noise, **self.null)
 
 
 def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
@@ -273,7 +177,7 @@ def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
 
 
 def cell_rows(episodes: int) -> int:
-    """The row count of every policy forward of a cell of `episodes` episodes (GuidedPolicy.conditional)."""
+    """The row count of every policy forward of a cell of `episodes` episodes (fast.evaluation_forward)."""
     return max(episodes, MIN_FORWARD_ROWS)
 
 
@@ -294,9 +198,8 @@ def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_
     returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
     running = np.ones(episodes, dtype=bool)
     t = 0
-    coefficients = policy.coefficients(guidance)
     while running.any():
-        actions = policy.act(obs, guidance, noise[t], deterministic, coefficients)
+        actions = policy.act(obs, guidance, noise[t], deterministic)
         for i in np.flatnonzero(running):
             obs[i], reward, terminated, truncated, _ = envs[i].step(actions[i])
             returns[i] += reward
@@ -386,15 +289,15 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job, digest, [], 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
     returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
-    train_args = ckpt["args"]
+    identity = run_identity(ckpt["args"], ckpt["action_space"])
     common = {
         "env_id": ckpt["env_id"],
-        "variant": variant_id(train_args["guidance"], train_args["cond_dropout"]),
+        "variant": identity.variant,
         "config": config,
         "run": job.checkpoint.parent.parent.name,
-        "seed": train_args["seed"],
-        "train_guidance": train_args["guidance"],
-        "cond_dropout": train_args["cond_dropout"],
+        "seed": ckpt["args"]["seed"],
+        "train_guidance": identity.train_guidance,
+        "cond_dropout": identity.cond_dropout,
         "step": ckpt["step_mark"],
         "global_step": ckpt["global_step"],
         "eval_guidance": job.gamma,
@@ -505,9 +408,9 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
     for checkpoint in checkpoints:
         try:
             digest, ckpt = read_checkpoint(checkpoint)
-            train_args = ckpt["args"]
-            identity = (ckpt["env_id"], config_label(ckpt), train_args["guidance"], train_args["cond_dropout"],
-                        train_args["seed"], ckpt["step_mark"])  # fmt: skip
+            run = run_identity(ckpt["args"], ckpt["action_space"])
+            identity = (ckpt["env_id"], config_label(ckpt), run.train_guidance, run.cond_dropout, ckpt["args"]["seed"],
+                        ckpt["step_mark"])  # fmt: skip
             kind = ckpt["action_space"]
         except ValueError as e:  # read_checkpoint's: unreadable, not a checkpoint of these scripts, non-finite
             skipped.append(f"{checkpoint}: {e}")

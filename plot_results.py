@@ -77,7 +77,8 @@ from pgg_utils.agreement import (
 from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.figures import cell_index, ordered_series
 from pgg_utils.files import MANIFEST, InputError, read_csv, read_manifest, remove_stale, write_atomic, write_manifest
-from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_id, variant_rank
+from pgg_utils.identity import variant_id
+from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_rank
 from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 
@@ -343,7 +344,7 @@ def training_curves(run_paths) -> dict:
         if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
             continue
         events = accumulator.Scalars("charts/episodic_return")
-        variant = variant_id(run_args["guidance"], run_args["cond_dropout"])
+        variant = variant_id(run_args)
         steps, returns = np.array([e.step for e in events]), np.array([e.value for e in events])
         runs.append((run_args, variant, steps, returns, args_file.parent))
     if not runs:

@@ -21,7 +21,7 @@ management (run directories, checkpoints, resume, progress) is in `pgg_utils.run
 
 import math
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -32,14 +32,15 @@ from torch import nn
 
 from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
-from pgg_utils.fast import flatten_parameters, numpy_forward, numpy_layers
+from pgg_utils.fast import evaluation_forward, flatten_parameters, guidance_coefficients, numpy_network
+from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 
 ACTION_SPACE = "continuous"  # the checkpoints' kind; the sweep picks this script by it
 LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
 
 
 @dataclass
-class Args(RunArgs):
+class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-dropout (pgg_utils/guidance.py)
     env_id: str = "Hopper-v4"
     """the id of a gymnasium environment with a Box action space"""
     total_timesteps: int = 1_000_000
@@ -78,10 +79,8 @@ class Args(RunArgs):
     """normalised observations are clipped to [-obs_clip, obs_clip]"""
     reward_clip: float = 10.0
     """normalised rewards are clipped to [-reward_clip, reward_clip]"""
-    guidance: float = 1.0  # PGG
-    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""  # PGG
-    cond_dropout: float = 0.0  # PGG
-    """probability that a sample's actor input is replaced by the null embedding during updates"""  # PGG
+    null_dims: tuple[int, ...] | None = None  # PGG
+    """observation indices the null embedding replaces (e.g. a goal's: Reacher-v4 4 5 8 9 10, Pusher-v4 20 21 22); None: all, the paper's"""  # PGG
     checkpoint_interval: int = 200_000
     """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
 
@@ -197,9 +196,10 @@ def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
 
 
 class Agent(nn.Module):
-    """Actor and critic work on normalised observations; `obs_norm(raw)` produces them."""
+    """Actor and critic work on normalised observations; `obs_norm(raw)` produces them. Change the
+    networks here: the rollouts' numpy copy and the evaluation follow the modules (pgg_utils/fast.py)."""
 
-    def __init__(self, obs_dim: int, action_dim: int, obs_clip: float = 10.0):
+    def __init__(self, obs_dim: int, action_dim: int, obs_clip: float = 10.0, null_dims=None, action_bounds=None):
         super().__init__()
         self.critic = nn.Sequential(
             layer_init(nn.Linear(obs_dim, 64)),
@@ -221,35 +221,88 @@ class Agent(nn.Module):
         # the running mean observation, a neutral "average state", and draw nothing from the RNG, so
         # every other weight is initialised exactly as in PPO with the same seed.
         self.null_obs = nn.Parameter(torch.zeros(obs_dim))  # PGG
+        # With null_dims the embedding replaces those dimensions only (a goal): pi(a|s, null) is then
+        # a policy of the rest of the state, computed per row.
+        self.null_mask = None if null_dims is None else torch.zeros(obs_dim, dtype=torch.bool)  # PGG
+        if null_dims is not None:  # PGG
+            self.null_mask[list(null_dims)] = True  # PGG
+        # The task's action bounds (low, high) that actions are clipped to when acting; not trained.
+        self.action_bounds = action_bounds
 
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
 
+    def null_input(self, obs):  # PGG
+        """The actor's input of the unconditional branch: one row (the whole observation nulled), or one
+        per row of `obs` with the null_dims replaced (torch tensors or numpy arrays)."""
+        if self.null_mask is None:  # PGG
+            return self.null_obs.unsqueeze(0) if torch.is_tensor(obs) else self.null_obs.detach().numpy()[None]  # PGG
+        if torch.is_tensor(obs):  # PGG
+            return torch.where(self.null_mask, self.null_obs, obs)  # PGG
+        return np.where(self.null_mask.numpy(), self.null_obs.detach().numpy(), obs)  # PGG
+
     def unconditional_mean(self) -> torch.Tensor:  # PGG
-        """Mean of pi(.|null), shape (action_dim,); one actor pass whatever the batch size."""
+        """Mean of pi(.|null), shape (action_dim,), with the whole observation nulled."""
         return self.actor_mean(self.null_obs.unsqueeze(0))[0]  # PGG
 
     def guided_mean(  # PGG
         self,
         obs: torch.Tensor,
-        guidance: float,
+        guidance: torch.Tensor | float | None,
         drop_mask: torch.Tensor | None = None,  # PGG
     ) -> torch.Tensor:  # PGG
-        """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations.
+        """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations. `guidance`
+        None means a run without guidance (PPO's own actor pass: the null embedding gets no gradient);
         `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
-        # pi_hat = pi exactly at γ = 1: PPO's own actor pass, as an extra null row could change how
-        # the product is blocked, hence its rounding; the null embedding then gets no gradient.
-        if guidance == 1.0 and drop_mask is None:  # PGG
+        if guidance is None and drop_mask is None:  # PGG
             return self.actor_mean(obs)  # PGG
-        # The null embedding rides along as one extra row of the same actor pass: a separate one-row
-        # pass costs as much as the whole batch at this size (and can round differently from it).
-        mean_cond, mean_null = self.actor_mean(torch.cat([obs, self.null_obs.unsqueeze(0)])).split([len(obs), 1])  # PGG
+        # The null input rides along in the same actor pass: a separate one-row pass costs as much as
+        # the whole batch at this size (and can round differently from it).
+        null_in = self.null_input(obs)  # PGG
+        mean_cond, mean_null = self.actor_mean(torch.cat([obs, null_in])).split([len(obs), len(null_in)])  # PGG
         if drop_mask is not None:  # PGG
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)  # PGG
-        return guide(mean_cond, mean_null, guidance)  # PGG
+        return guide(mean_cond, mean_null, 1.0 if guidance is None else guidance)  # PGG
+
+    @torch.no_grad()
+    def acting_mean(self, raw_obs: np.ndarray, guidance, mean_null=None) -> np.ndarray:  # PGG
+        """The guided mean `act` samples around, float32 numpy, for a batch of raw observations."""
+        obs = self.obs_norm.normalise(raw_obs)
+        mean_cond = evaluation_forward(self.actor_mean, obs)
+        if self.null_mask is not None:  # PGG: one null input per row
+            mean_null = evaluation_forward(self.actor_mean, self.null_input(obs))  # PGG
+        elif mean_null is None:  # PGG
+            mean_null = self.unconditional_mean().numpy()  # PGG
+        coef_null, coef_cond = guidance_coefficients(guidance, len(obs))  # PGG
+        return coef_null * mean_null + coef_cond * mean_cond  # PGG
+
+    @torch.no_grad()
+    def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:
+        """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for raw
+        observations (one, or a batch): normalised inside, sampled with standard normal `noise` shaped
+        like the actions (drawn from torch's generator if None) or the mean if `deterministic`, and
+        clipped to the task's bounds. `mean_null`: the unconditional mean where the caller holds it
+        (the sweep computes it once). The sweep acts through this method."""
+        raw = np.asarray(raw_obs, dtype=np.float64)
+        single = raw.ndim == 1
+        mean = self.acting_mean(raw[None] if single else raw, guidance, mean_null)  # PGG
+        if not deterministic:
+            noise = torch.randn(mean.shape).numpy() if noise is None else np.asarray(noise, dtype=np.float32)
+            mean += self.actor_logstd.exp()[0].numpy() * noise
+        if self.action_bounds is not None:
+            low, high = self.action_bounds
+            mean = np.maximum(np.minimum(mean, high), low)
+        return mean[0] if single else mean
 
 
-def guide(cond, null, guidance: float):  # PGG
+def make_agent(args: dict, shapes: dict) -> Agent:
+    """The agent of a run from its training arguments and the task's shapes (checkpoint_shapes): the one
+    constructor of training and of checkpoint loading, so an argument added to the network reaches both."""
+    bounds = (np.asarray(shapes["action_low"], np.float32), np.asarray(shapes["action_high"], np.float32))
+    return Agent(shapes["obs_dim"], shapes["action_dim"], args["obs_clip"], args.get("null_dims"), bounds)  # PGG
+
+
+def guide(cond, null, guidance):  # PGG
     """The guided branch (1-γ)·null + γ·cond. For numpy arrays (rollouts) that formula; for torch
     tensors (updates) torch.lerp(null, cond, γ), one op in place of three with their backward, which
     computes the same mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit)."""
@@ -271,6 +324,7 @@ def gaussian_entropy(logstd):
 # On one observation every torch call pays microseconds of dispatch, and these made up most of a
 # rollout step's own time: acting in numpy, with the same float32 arithmetic on views of the agent's
 # weights, made training ~1.3x faster (benchmarks/README.md; agreement: tests/test_equivalence.py).
+# The numpy networks are derived from the modules (pgg_utils.fast.numpy_network), never written here.
 
 
 class RolloutPolicy:
@@ -279,13 +333,14 @@ class RolloutPolicy:
     build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
-        self.actor, self.critic = numpy_layers(agent.actor_mean), numpy_layers(agent.critic)
+        self.actor, self.critic = numpy_network(agent.actor_mean), numpy_network(agent.critic)
         norm = agent.obs_norm
         self.obs_mean, self.obs_var, self.obs_count = norm.mean.numpy(), norm.var.numpy(), norm.count.numpy()
         self.obs_epsilon, self.obs_clip = norm.epsilon, norm.clip
         self.guidance = guidance  # PGG
         self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
+        self.null_input = None if agent.null_mask is None else agent.null_input  # PGG: per-row null inputs
         with torch.no_grad():  # PGG
             self.mean_null = agent.unconditional_mean().numpy()  # PGG
 
@@ -301,13 +356,14 @@ class RolloutPolicy:
     def act(self, obs: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs` of normalised observations;
         `noise` is standard normal, shaped like the actions."""
-        mean = guide(numpy_forward(self.actor, obs), self.mean_null, self.guidance)  # PGG
+        mean_null = self.mean_null if self.null_input is None else self.actor(self.null_input(obs))  # PGG
+        mean = guide(self.actor(obs), mean_null, self.guidance)  # PGG
         # log N(mean + std·noise; mean, std) per dimension is -noise²/2 - log std - log √(2π).
         log_probs = (-0.5 * np.square(noise) - self.logstd - LOG_SQRT_2PI).sum(-1)
         return mean + self.std * noise, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
-        return numpy_forward(self.critic, obs)[:, 0]
+        return self.critic(obs)[:, 0]
 
 
 # --- rollout, GAE, loss, update ------------------------------------------------------------------
@@ -390,12 +446,13 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
-def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):  # PGG
+def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
-    place of pi. Returns (loss, stats); the stats are detached tensors, not floats, so that the
-    compiled version (--compile) runs without a break back to Python."""
+    place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
+    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats); the stats are detached
+    tensors, not floats, so that the compiled version (--compile) runs without a break back to Python."""
     mb_obs = batch["obs"][mb_inds]
-    mean = agent.guided_mean(mb_obs, args.guidance, drop_mask)  # PGG
+    mean = agent.guided_mean(mb_obs, guidance, drop_mask)  # PGG
     newlogprob = gaussian_log_prob(batch["actions"][mb_inds], mean, agent.actor_logstd)
     entropy = gaussian_entropy(agent.actor_logstd)
     newvalue = agent.get_value(mb_obs)
@@ -456,7 +513,14 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
 
 
 def ppo_update(
-    agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss
+    agent,
+    optimizer,
+    buf: Rollout,
+    advantages,
+    returns,
+    args: Args,
+    guidance,  # PGG
+    loss_fn=minibatch_loss,
 ) -> dict[str, float]:
     """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
     batch = {
@@ -477,7 +541,8 @@ def ppo_update(
             drop_mask = None  # PGG
             if args.cond_dropout > 0:  # PGG
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
-            loss, stats = loss_fn(agent, batch, b_inds[start : start + minibatch_size], drop_mask, args)  # PGG
+            mb_inds = b_inds[start : start + minibatch_size]
+            loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
@@ -500,12 +565,14 @@ def ppo_update(
 @torch.no_grad()  # PGG
 def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:  # PGG
     """How far guidance moves the policy, and what the unconditional branch has learned. With a
-    shared σ, KL(pi_hat || pi_s) = ½ Σ ((mu_hat - mu_s)/σ)²."""
-    mean_guided = agent.guided_mean(obs, guidance)  # PGG
-    mean_cond = agent.actor_mean(obs)  # PGG
+    shared σ, KL(pi_hat || pi_s) = ½ Σ ((mu_hat - mu_s)/σ)² = ½ (γ-1)² Σ ((mu_s - mu_null)/σ)²."""
+    null_in = agent.null_input(obs)  # PGG
+    mean_cond, mean_null = agent.actor_mean(torch.cat([obs, null_in])).split([len(obs), len(null_in)])  # PGG
     inv_std = torch.exp(-agent.actor_logstd)  # PGG
-    kl = (0.5 * ((mean_guided - mean_cond) * inv_std).square().sum(-1)).mean().item()  # PGG
+    shift = (guide(mean_cond, mean_null, guidance) - mean_cond) * inv_std  # PGG
+    kl = (0.5 * shift.square().sum(-1)).mean().item()  # PGG
     return {  # PGG
+        "pgg/guidance": guidance,  # PGG: γ_train of this iteration
         "pgg/kl_guided_vs_conditional": kl,  # PGG
         "pgg/unconditional_mean_norm": agent.unconditional_mean().norm().item(),  # PGG
         "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
@@ -527,11 +594,12 @@ def train(args: Args, run: runs.Run) -> None:
         args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
     )
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
-    agent = Agent(obs_dim, action_dim, args.obs_clip)
-    # At γ = 1 without dropout the null embedding is outside the objective: its all-zero gradient in
-    # the flat buffer would still change the clipping norm's rounding; without it the run is PPO's bits.
-    vanilla = args.guidance == 1.0 and args.cond_dropout == 0  # PGG
-    trained = [p for name, p in agent.named_parameters() if not (vanilla and name == "null_obs")]  # PGG
+    agent = make_agent(asdict(args), checkpoint_shapes(envs))
+    # Without guidance or dropout at any iteration the null embedding is outside the objective: its
+    # all-zero gradient in the flat buffer would still change the clipping norm's rounding; without it
+    # the run is PPO's bits.
+    guided = uses_null_branch(args)  # PGG
+    trained = [p for name, p in agent.named_parameters() if guided or name != "null_obs"]  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
     # One fused kernel for the loss and one for its backward, in place of ~200 small ops.
@@ -540,6 +608,7 @@ def train(args: Args, run: runs.Run) -> None:
     batch_size = args.num_envs * args.num_steps
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
+    schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim, action_dim)
 
     raw_obs, _ = envs.reset(seed=args.seed)
@@ -549,6 +618,7 @@ def train(args: Args, run: runs.Run) -> None:
     if resumed is not None:
         agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
         optimizer.load_state_dict(resumed["resume"]["optimizer"])
+        schedule.load_state_dict(resumed["resume"].get("guidance"))  # PGG
         first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
             raw_obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
@@ -560,14 +630,19 @@ def train(args: Args, run: runs.Run) -> None:
             if args.anneal_lr:
                 optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
 
-            policy = RolloutPolicy(agent, args.guidance)  # PGG
+            guidance = schedule.value(iteration)  # PGG
+            policy = RolloutPolicy(agent, guidance)  # PGG
             next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, run.on_episode, global_step)
             global_step += batch_size
             next_value = policy.value(next_obs)
             advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
-            stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
-            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))  # PGG
+            # Under --compile γ_train is a tensor input, so a new value compiles no new graph; eager keeps
+            # the float, whose backward rounds (1 - γ) in double, as every run before schedules did.
+            loss_guidance = (torch.tensor(guidance) if args.compile else guidance) if guided else None  # PGG
+            stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
+            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
+            schedule.observe(stats)  # PGG: the adaptive rule's step
             stats["charts/action_std_mean"] = agent.actor_logstd.exp().mean().item()
             stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
             stats["charts/SPS"] = run.report(global_step, iteration, stats, optimizer.param_groups[0]["params"][0])
@@ -575,7 +650,7 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done)
+                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
         envs.close()
@@ -595,7 +670,14 @@ def checkpoint_shapes(envs) -> dict:
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
     runs.require_kind(ckpt, ACTION_SPACE, source)
-    agent = Agent(ckpt["obs_dim"], ckpt["action_dim"], ckpt["args"]["obs_clip"])
+    shapes = {"obs_dim": ckpt["obs_dim"], "action_dim": ckpt["action_dim"]}
+    if np.isfinite(ckpt.get("action_low", [-np.inf])).all() and np.isfinite(ckpt.get("action_high", [np.inf])).all():
+        shapes.update(action_low=ckpt["action_low"], action_high=ckpt["action_high"])
+    else:  # saved before 2026-11-22, with ClipAction's ±inf: the environment's own bounds
+        probe = make_env(ckpt["env_id"])()
+        shapes.update(action_low=probe.action_space.low, action_high=probe.action_space.high)
+        probe.close()
+    agent = make_agent(ckpt["args"], shapes)
     agent.load_state_dict(ckpt["model"])
     return agent.eval()
 

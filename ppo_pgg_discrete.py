@@ -20,7 +20,7 @@ progress) is in `pgg_utils.runs`.
 """
 
 from collections import defaultdict
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import gymnasium as gym
@@ -31,13 +31,14 @@ from torch import nn
 
 from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
-from pgg_utils.fast import flatten_parameters, numpy_forward, numpy_layers
+from pgg_utils.fast import evaluation_forward, flatten_parameters, guidance_coefficients, numpy_network
+from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 
 ACTION_SPACE = "discrete"  # the checkpoints' kind; the sweep picks this script by it
 
 
 @dataclass
-class Args(RunArgs):
+class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-dropout (pgg_utils/guidance.py)
     env_id: str = "CartPole-v1"
     """the id of a gymnasium environment with a Discrete action space"""
     total_timesteps: int = 500_000
@@ -72,10 +73,6 @@ class Args(RunArgs):
     """the maximum norm for gradient clipping"""
     target_kl: float | None = None
     """stop the epochs early when the approximate KL (of the rows not dropped) exceeds this"""
-    guidance: float = 1.0  # PGG
-    """PGG guidance strength γ used for rollouts and updates (1 = vanilla PPO; the paper trains with 1.1)"""  # PGG
-    cond_dropout: float = 0.0  # PGG
-    """probability that a sample's actor input is replaced by the null embedding during updates"""  # PGG
 
 
 def make_env(env_id: str, video_dir: Path | None = None):
@@ -112,6 +109,9 @@ def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
 
 
 class Agent(nn.Module):
+    """Change the networks here: the rollouts' numpy copy and the evaluation follow the modules
+    (pgg_utils/fast.py)."""
+
     def __init__(self, obs_dim: int, n_actions: int):
         super().__init__()
         self.critic = nn.Sequential(
@@ -143,24 +143,53 @@ class Agent(nn.Module):
     def guided_logits(  # PGG
         self,
         obs: torch.Tensor,
-        guidance: float,
+        guidance: torch.Tensor | float | None,
         drop_mask: torch.Tensor | None = None,  # PGG
     ) -> torch.Tensor:  # PGG
-        """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `drop_mask` (bool, (B,))
-        replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
-        # pi_hat = pi exactly at γ = 1: PPO's own actor pass, as an extra null row could change how
-        # the product is blocked, hence its rounding; the null embedding then gets no gradient.
-        if guidance == 1.0 and drop_mask is None:  # PGG
+        """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `guidance` None means a run
+        without guidance (PPO's own actor pass: the null embedding gets no gradient); `drop_mask`
+        (bool, (B,)) replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
+        if guidance is None and drop_mask is None:  # PGG
             return self.actor(obs)  # PGG
         # The null embedding rides along as one extra row of the same actor pass: a separate one-row
         # pass costs as much as the whole batch at this size (and can round differently from it).
         logits_cond, logits_null = self.actor(torch.cat([obs, self.null_obs.unsqueeze(0)])).split([len(obs), 1])  # PGG
         if drop_mask is not None:  # PGG
             logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)  # PGG
-        return guide(logits_cond, logits_null, guidance)  # PGG
+        return guide(logits_cond, logits_null, 1.0 if guidance is None else guidance)  # PGG
+
+    @torch.no_grad()
+    def acting_logits(self, obs: np.ndarray, guidance, logits_null=None) -> np.ndarray:  # PGG
+        """The guided logits `act` samples from, float32 numpy, for a float32 batch `obs`."""
+        logits_cond = evaluation_forward(self.actor, obs)
+        if logits_null is None:  # PGG
+            logits_null = self.unconditional_logits().numpy()  # PGG
+        coef_null, coef_cond = guidance_coefficients(guidance, len(logits_cond))  # PGG
+        return coef_null * logits_null + coef_cond * logits_cond  # PGG
+
+    @torch.no_grad()
+    def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:
+        """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for observations
+        (one, or a batch): sampled by the Gumbel-max trick with standard Gumbel `noise` shaped like the
+        logits (drawn from torch's generator if None), or the argmax if `deterministic`. `logits_null`:
+        the unconditional branch where the caller holds it (the sweep computes it once, or takes zeros
+        for its uniform-null control). The sweep acts through this method."""
+        obs = np.asarray(obs, dtype=np.float32)
+        single = obs.ndim == 1
+        logits = self.acting_logits(obs[None] if single else obs, guidance, logits_null)  # PGG
+        if not deterministic:
+            logits += gumbel_noise(*logits.shape) if noise is None else np.asarray(noise, dtype=np.float32)
+        actions = logits.argmax(-1)
+        return actions[0] if single else actions
 
 
-def guide(cond, null, guidance: float):  # PGG
+def make_agent(args: dict, shapes: dict) -> Agent:
+    """The agent of a run from its training arguments and the task's shapes (checkpoint_shapes): the one
+    constructor of training and of checkpoint loading, so an argument added to the network reaches both."""
+    return Agent(shapes["obs_dim"], shapes["n_actions"])
+
+
+def guide(cond, null, guidance):  # PGG
     """The guided branch (1-γ)·null + γ·cond. For numpy arrays (rollouts) that formula; for torch
     tensors (updates) torch.lerp(null, cond, γ), one op in place of three with their backward, which
     computes the same mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit)."""
@@ -180,6 +209,7 @@ def gumbel_noise(*shape: int) -> np.ndarray:
 # On a batch of a few observations every torch call pays microseconds of dispatch, and these made up
 # most of a rollout step: acting in numpy, with the same float32 arithmetic on views of the agent's
 # weights, made training ~1.3x faster (benchmarks/README.md; agreement: tests/test_equivalence.py).
+# The numpy networks are derived from the modules (pgg_utils.fast.numpy_network), never written here.
 
 
 class RolloutPolicy:
@@ -187,7 +217,7 @@ class RolloutPolicy:
     fixed until the update). It caches pi(.|null): build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
-        self.actor, self.critic = numpy_layers(agent.actor), numpy_layers(agent.critic)
+        self.actor, self.critic = numpy_network(agent.actor), numpy_network(agent.critic)
         self.n_actions = agent.actor[-1].out_features
         self.guidance = guidance  # PGG
         with torch.no_grad():  # PGG
@@ -196,7 +226,7 @@ class RolloutPolicy:
     def act(self, obs: np.ndarray, gumbel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs`. Actions are sampled by the
         Gumbel-max trick with `gumbel`, standard Gumbel noise shaped like the logits."""
-        logits = guide(numpy_forward(self.actor, obs), self.logits_null, self.guidance)  # PGG
+        logits = guide(self.actor(obs), self.logits_null, self.guidance)  # PGG
         actions = (logits + gumbel).argmax(-1)
         shifted = logits - logits.max(-1, keepdims=True)
         # The log-softmax of the sampled actions only: a third of the cost of the full one.
@@ -204,7 +234,7 @@ class RolloutPolicy:
         return actions, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
-        return numpy_forward(self.critic, obs)[:, 0]
+        return self.critic(obs)[:, 0]
 
 
 # --- rollout, GAE, loss, update ------------------------------------------------------------------
@@ -282,12 +312,13 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
-def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, args: Args):  # PGG
+def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
-    place of pi. Returns (loss, stats); the stats are detached tensors, not floats, so that the
-    compiled version (--compile) runs without a break back to Python."""
+    place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
+    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats); the stats are detached
+    tensors, not floats, so that the compiled version (--compile) runs without a break back to Python."""
     mb_obs = batch["obs"][mb_inds]
-    logp_all = agent.guided_logits(mb_obs, args.guidance, drop_mask).log_softmax(-1)  # PGG
+    logp_all = agent.guided_logits(mb_obs, guidance, drop_mask).log_softmax(-1)  # PGG
     newlogprob = logp_all.gather(-1, batch["actions"][mb_inds].unsqueeze(-1)).squeeze(-1)
     entropy = -(logp_all.exp() * logp_all).sum(-1)
     newvalue = agent.get_value(mb_obs)
@@ -348,7 +379,14 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
 
 
 def ppo_update(
-    agent, optimizer, buf: Rollout, advantages, returns, args: Args, loss_fn=minibatch_loss
+    agent,
+    optimizer,
+    buf: Rollout,
+    advantages,
+    returns,
+    args: Args,
+    guidance,  # PGG
+    loss_fn=minibatch_loss,
 ) -> dict[str, float]:
     """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
     batch = {
@@ -369,7 +407,8 @@ def ppo_update(
             drop_mask = None  # PGG
             if args.cond_dropout > 0:  # PGG
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
-            loss, stats = loss_fn(agent, batch, b_inds[start : start + minibatch_size], drop_mask, args)  # PGG
+            mb_inds = b_inds[start : start + minibatch_size]
+            loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
@@ -392,10 +431,12 @@ def ppo_update(
 @torch.no_grad()  # PGG
 def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:  # PGG
     """How far guidance moves the policy, and what the unconditional branch has learned."""
-    logp_guided = agent.guided_logits(obs, guidance).log_softmax(-1)  # PGG
-    logp_cond = agent.actor(obs).log_softmax(-1)  # PGG
-    logp_null = agent.unconditional_logits().log_softmax(-1)  # PGG
+    logits_cond, logits_null = agent.actor(torch.cat([obs, agent.null_obs.unsqueeze(0)])).split([len(obs), 1])  # PGG
+    logp_guided = guide(logits_cond, logits_null, guidance).log_softmax(-1)  # PGG
+    logp_cond = logits_cond.log_softmax(-1)  # PGG
+    logp_null = logits_null[0].log_softmax(-1)  # PGG
     return {  # PGG
+        "pgg/guidance": guidance,  # PGG: γ_train of this iteration
         "pgg/kl_guided_vs_conditional": (logp_guided.exp() * (logp_guided - logp_cond)).sum(-1).mean().item(),  # PGG
         "pgg/entropy_unconditional": -(logp_null.exp() * logp_null).sum().item(),  # PGG
         "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
@@ -415,11 +456,12 @@ def train(args: Args, run: runs.Run) -> None:
 
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
     obs_dim = envs.single_observation_space.shape[0]
-    agent = Agent(obs_dim, envs.single_action_space.n)
-    # At γ = 1 without dropout the null embedding is outside the objective: its all-zero gradient in
-    # the flat buffer would still change the clipping norm's rounding; without it the run is PPO's bits.
-    vanilla = args.guidance == 1.0 and args.cond_dropout == 0  # PGG
-    trained = [p for name, p in agent.named_parameters() if not (vanilla and name == "null_obs")]  # PGG
+    agent = make_agent(asdict(args), checkpoint_shapes(envs))
+    # Without guidance or dropout at any iteration the null embedding is outside the objective: its
+    # all-zero gradient in the flat buffer would still change the clipping norm's rounding; without it
+    # the run is PPO's bits.
+    guided = uses_null_branch(args)  # PGG
+    trained = [p for name, p in agent.named_parameters() if guided or name != "null_obs"]  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
     # One fused kernel for the loss and one for its backward, in place of ~200 small ops.
@@ -428,6 +470,7 @@ def train(args: Args, run: runs.Run) -> None:
     batch_size = args.num_envs * args.num_steps
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
+    schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim)
 
     obs, _ = envs.reset(seed=args.seed)
@@ -437,6 +480,7 @@ def train(args: Args, run: runs.Run) -> None:
     if resumed is not None:
         agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
         optimizer.load_state_dict(resumed["resume"]["optimizer"])
+        schedule.load_state_dict(resumed["resume"].get("guidance"))  # PGG
         first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
         if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
             obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
@@ -448,21 +492,26 @@ def train(args: Args, run: runs.Run) -> None:
             if args.anneal_lr:
                 optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
 
-            policy = RolloutPolicy(agent, args.guidance)  # PGG
+            guidance = schedule.value(iteration)  # PGG
+            policy = RolloutPolicy(agent, guidance)  # PGG
             next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, run.on_episode, global_step)
             global_step += batch_size
             next_value = policy.value(next_obs)
             advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
-            stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_fn)
-            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), args.guidance))  # PGG
+            # Under --compile γ_train is a tensor input, so a new value compiles no new graph; eager keeps
+            # the float, whose backward rounds (1 - γ) in double, as every run before schedules did.
+            loss_guidance = (torch.tensor(guidance) if args.compile else guidance) if guided else None  # PGG
+            stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
+            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
+            schedule.observe(stats)  # PGG: the adaptive rule's step
             stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
             stats["charts/SPS"] = run.report(global_step, iteration, stats, optimizer.param_groups[0]["params"][0])
             for key, value in stats.items():
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done)
+                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
         envs.close()
@@ -476,7 +525,7 @@ def checkpoint_shapes(envs) -> dict:
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
     runs.require_kind(ckpt, ACTION_SPACE, source)
-    agent = Agent(ckpt["obs_dim"], ckpt["n_actions"])
+    agent = make_agent(ckpt["args"], ckpt)
     agent.load_state_dict(ckpt["model"])
     return agent.eval()
 

@@ -53,11 +53,13 @@ class Preset:
     episodes: int
 
 
-VARIANT_IDS = tuple(paper.VARIANTS)
+VARIANT_IDS = (*paper.VARIANTS, *paper.BEYOND_VARIANTS)
 PRESETS = {
-    "quick": Preset(("CartPole-v1",), 2, VARIANT_IDS, 50_000, 25_000, (1.0, 2.0, 5.0), 20),
-    "discrete": Preset(paper.PAPER_ENVS["discrete"], paper.PAPER_SEEDS, VARIANT_IDS, None, None, None, 50),
-    "continuous": Preset(paper.PAPER_ENVS["continuous"], paper.PAPER_SEEDS, VARIANT_IDS, None, None, None, 50),
+    "quick": Preset(("CartPole-v1",), 2, tuple(paper.VARIANTS), 50_000, 25_000, (1.0, 2.0, 5.0), 20),
+    "discrete": Preset(paper.PAPER_ENVS["discrete"], paper.PAPER_SEEDS, tuple(paper.VARIANTS), None, None, None, 50),
+    "continuous": Preset(
+        paper.PAPER_ENVS["continuous"], paper.PAPER_SEEDS, tuple(paper.VARIANTS), None, None, None, 50
+    ),
 }
 RUNNING: set[subprocess.Popen] = set()  # training children, ended with the launcher
 SUBMITTED: list = []  # submitit jobs (the same), cancelled by SIGINT / SIGTERM
@@ -76,7 +78,7 @@ class Args:
     seeds: Annotated[int | None, FROM_PRESET] = None
     """number of seeds, 1..N"""
     variants: Annotated[tuple[Literal[VARIANT_IDS], ...] | None, FROM_PRESET] = None
-    """training variants (every preset has all three)"""
+    """training variants: the paper's three (every preset has them), or beyond it: pgg_g1to1.2 (linear γ_train), pgg_adaptive1.1_kl0.02 (adaptive), pgg_g1.1_goal (null on the goal, Reacher-v4 and Pusher-v4)"""
     total_timesteps: Annotated[int | None, FROM_PRESET_OR_PAPER] = None
     """training steps per run"""
     checkpoint_interval: Annotated[int | None, FROM_PRESET_OR_PAPER] = None
@@ -140,6 +142,11 @@ def argument_error(args: Args) -> str | None:
             return f"--envs: {e}"
         if error := runs.env_error(env_id, kind):
             return f"--envs: {error}"
+        for variant in chosen.variants:
+            try:
+                paper.variant_flags(variant, env_id)
+            except ValueError as e:
+                return f"--variants: {e}"
         batch = paper.REFERENCE_ARGS[kind]["num_envs"] * paper.REFERENCE_ARGS[kind]["num_steps"]
         if chosen.checkpoint_interval is not None and chosen.checkpoint_interval < batch:
             return (f"--checkpoint-interval must be at least one batch of {env_id}'s training script, "
@@ -181,9 +188,8 @@ class RunSpec:
         return None if latest is None else runs.checkpoint_step(latest)
 
     def command(self) -> list[str]:
-        guidance, dropout = paper.VARIANTS[self.variant]
         cmd = [sys.executable, str(SCRIPTS[paper.action_kind(self.env_id)]), "--env-id", self.env_id,
-               "--seed", str(self.seed), "--guidance", str(guidance), "--cond-dropout", str(dropout),
+               "--seed", str(self.seed), *paper.variant_flags(self.variant, self.env_id),
                "--output-dir", self.root, "--run-name", self.name, "--torch-threads", "1"]  # fmt: skip
         if self.total_timesteps is not None:
             cmd += ["--total-timesteps", str(self.total_timesteps)]

@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import reproduce
 from pgg_utils import runs
 from pgg_utils.files import InputError, one_line_errors
-from pgg_utils.paper import variant_id
+from pgg_utils.identity import variant_id
 
 
 @dataclass
@@ -54,7 +54,7 @@ def retrain(agent: Path, root: Path) -> Path:
     if not shipped:
         raise InputError(f"{agent} holds no checkpoints/step_*.pt")
     args = read(shipped[-1])["args"]
-    variant = variant_id(args["guidance"], args["cond_dropout"])
+    variant = variant_id(args)
     spec = reproduce.RunSpec(args["env_id"], variant, args["seed"], str(root), args["total_timesteps"],
                              args["checkpoint_interval"], args["compile"])  # fmt: skip
     try:

@@ -72,6 +72,7 @@ def run_name_error(name: str | None) -> str | None:
 
 
 # name -> (holds, requirement); NaN fails every comparison. Rules of arguments a script lacks are skipped.
+# Every training argument has one (tests/test_extending.py), so a new flag cannot go unchecked.
 ARGUMENT_RULES = {
     "learning_rate": (lambda v: 0 < v < math.inf, "a finite number > 0"),
     "discount": (lambda v: 0 <= v <= 1, "in [0, 1]"),
@@ -82,7 +83,17 @@ ARGUMENT_RULES = {
     "max_grad_norm": (lambda v: 0 < v < math.inf, "a finite number > 0"),
     "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
     "cond_dropout": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+    "guidance": (lambda v: 0 <= v <= MAX_GUIDANCE, f"a number in [0, {MAX_GUIDANCE:g}]"),
+    "guidance_schedule": (lambda v: v in ("constant", "linear", "adaptive"), "constant, linear or adaptive"),
+    "guidance_final": (lambda v: v is None or 0 <= v <= MAX_GUIDANCE, f"a number in [0, {MAX_GUIDANCE:g}]"),
+    "guidance_kl_target": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
+    "guidance_bounds": (lambda v: 0 <= v[0] <= v[1] <= MAX_GUIDANCE, f"low <= high in [0, {MAX_GUIDANCE:g}]"),
+    "null_dims": (lambda v: v is None or (len(v) > 0 and len(set(v)) == len(v)), "distinct observation indices"),
     "total_timesteps": (lambda v: v > 0, "positive"),
+    "num_minibatches": (lambda v: v > 0, "positive"),
+    "anneal_lr": (lambda v: isinstance(v, bool), "true or false"),
+    "norm_adv": (lambda v: isinstance(v, bool), "true or false"),
+    "clip_vloss": (lambda v: isinstance(v, bool), "true or false"),
     "num_envs": (lambda v: v > 0, "positive"),
     "num_steps": (lambda v: v > 0, "positive"),
     "update_epochs": (lambda v: v > 0, "positive"),

@@ -21,16 +21,85 @@ def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
     return flat
 
 
-def numpy_layers(mlp: nn.Sequential) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(weight transposed, bias) of each Linear layer, as numpy views of the parameters."""
-    return [
-        (layer.weight.detach().numpy().T, layer.bias.detach().numpy()) for layer in mlp if isinstance(layer, nn.Linear)
-    ]
+# Layers the numpy forward computes itself, with the float32 operation torch does; any other layer sends
+# that network through its own torch forward (correct, slower).
+NUMPY_ACTIVATIONS = {nn.Tanh: np.tanh, nn.ReLU: lambda x: np.maximum(x, np.float32(0.0)), nn.Identity: lambda x: x}
+PROBE_ROWS = 8
 
 
-def numpy_forward(layers, x: np.ndarray) -> np.ndarray:
-    """The agents' Linear-Tanh-...-Linear networks, in numpy."""
-    for weight, bias in layers[:-1]:
-        x = np.tanh(x @ weight + bias)
-    weight, bias = layers[-1]
-    return x @ weight + bias
+def numpy_network(module: nn.Module):
+    """`module`'s forward for rollouts, as a function of a float32 numpy batch: numpy on views of its
+    weights where it is an nn.Sequential of Linear layers and NUMPY_ACTIVATIONS, else the module's own
+    torch forward. Checked against the module on a probe batch when built; ValueError with one line
+    naming the network where they disagree (a layer this function treats wrongly)."""
+    steps = numpy_steps(module)
+    if steps is None:
+        forward = torch_forward(module)
+    else:
+
+        def forward(x: np.ndarray) -> np.ndarray:
+            for step in steps:
+                x = step(x)
+            return x
+
+    in_features = next(m.in_features for m in module.modules() if isinstance(m, nn.Linear))
+    probe = np.random.default_rng(0).standard_normal((PROBE_ROWS, in_features)).astype(np.float32)
+    expected = torch_forward(module)(probe)
+    if not np.allclose(forward(probe), expected, rtol=1e-4, atol=1e-5):
+        layers = ", ".join(type(m).__name__ for m in module.children())
+        raise ValueError(f"the rollouts' numpy copy of the network ({layers}) disagrees with its torch module")
+    return forward
+
+
+def numpy_steps(module: nn.Module):
+    """The numpy operations of an nn.Sequential of known layers (views of its weights), or None."""
+    if not isinstance(module, nn.Sequential):
+        return None
+    steps = []
+    for layer in module:
+        if isinstance(layer, nn.Linear):
+            weight = layer.weight.detach().numpy().T
+            bias = None if layer.bias is None else layer.bias.detach().numpy()
+            steps.append(lambda x, w=weight, b=bias: x @ w if b is None else x @ w + b)
+        elif type(layer) in NUMPY_ACTIVATIONS:
+            steps.append(NUMPY_ACTIVATIONS[type(layer)])
+        else:
+            return None
+    return steps
+
+
+def torch_forward(module: nn.Module):
+    def forward(x: np.ndarray) -> np.ndarray:
+        with torch.no_grad():
+            return module(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))).numpy()
+
+    return forward
+
+
+# --- evaluation ----------------------------------------------------------------------------------
+
+# Evaluation forwards run on at least this many rows (padded). CPU BLAS rounds a 1-3 row product
+# differently from a larger one, so a one-observation forward pads to it; on the AMD EPYC this was
+# written on, products of 8 or more rows round alike.
+MIN_FORWARD_ROWS = 8
+
+
+def evaluation_forward(network: nn.Module, x: np.ndarray) -> np.ndarray:
+    """`network(x)` for acting with a trained agent, float32, one row per row of `x`. The forward runs
+    on at least MIN_FORWARD_ROWS rows (padded with copies of the first) in memory that torch allocated
+    (64-byte aligned), so that the shapes and the alignment of every product are a function of the row
+    count alone: a row's result depends on its own values, the row count and its position, never on
+    the other rows' values."""
+    rows = len(x)
+    padded = torch.empty(max(rows, MIN_FORWARD_ROWS), x.shape[1])
+    view = padded.numpy()
+    view[:rows] = x
+    view[rows:] = view[0]
+    with torch.no_grad():
+        return network(padded).numpy()[:rows]
+
+
+def guidance_coefficients(guidance, rows: int) -> tuple[np.ndarray, np.ndarray]:
+    """The float32 weights (1 - γ, γ) of the two branches, (rows, 1) each; `guidance` a number or one per row."""
+    guidance = np.broadcast_to(np.asarray(guidance, dtype=np.float64), (rows,))[:, None]
+    return (1.0 - guidance).astype(np.float32), guidance.astype(np.float32)

@@ -13,8 +13,47 @@ PAPER_GAMMAS = {
 }
 # Variant id -> (training guidance γ_train, conditioning dropout), in the paper's order.
 VARIANTS = {"ppo": (1.0, 0.0), "pgg_g1.1": (1.1, 0.0), "pgg_drop0.1": (1.0, 0.1)}
+# The observation dimensions a goal-conditioned null embedding replaces (--null-dims), from gymnasium's
+# documentation of the v4 observations: Reacher's target position (4, 5) and fingertip-minus-target
+# vector (8, 9, 10); Pusher's goal position (20, 21, 22).
+GOAL_DIMS = {"Reacher-v4": (4, 5, 8, 9, 10), "Pusher-v4": (20, 21, 22)}
+# Variants beyond the paper, the future work it names (scheduled and adaptive γ_train, guidance on a
+# goal), as the training flags that make them; "{goal}" stands for the task's GOAL_DIMS. Each id is the
+# one pgg_utils.identity gives a run of those flags (tests/test_extending.py).
+BEYOND_VARIANTS = {
+    # linear from 1 to 1.2: the same mean γ_train as the paper's constant 1.1, with no guidance while
+    # the null branch has learned nothing
+    "pgg_g1to1.2": ("--guidance", "1", "--guidance-schedule", "linear", "--guidance-final", "1.2"),
+    # held at the KL that the constant 1.1 reaches over its first 300k Hopper steps (a pilot, README of
+    # results/beyond), within γ_train 1 to 1.3
+    "pgg_adaptive1.1_kl0.02": ("--guidance", "1.1", "--guidance-schedule", "adaptive", "--guidance-kl-target", "0.02",
+                               "--guidance-bounds", "1", "1.3"),
+    "pgg_g1.1_goal": ("--guidance", "1.1", "--null-dims", "{goal}"),
+}  # fmt: skip
+
+
+def variant_flags(variant: str, env_id: str) -> list[str]:
+    """The training flags of a variant of the paper (VARIANTS) or beyond it (BEYOND_VARIANTS) on `env_id`;
+    ValueError where the variant needs goal dimensions the task has none of."""
+    if variant in VARIANTS:
+        guidance, dropout = VARIANTS[variant]
+        return ["--guidance", str(guidance), "--cond-dropout", str(dropout)]
+    flags = []
+    for flag in BEYOND_VARIANTS[variant]:
+        if flag == "{goal}":
+            if env_id not in GOAL_DIMS:
+                raise ValueError(f"{variant} needs goal dimensions; only {', '.join(GOAL_DIMS)} have them")
+            flags += [str(d) for d in GOAL_DIMS[env_id]]
+        else:
+            flags.append(flag)
+    return flags
+
+
 PAPER_SEEDS = 5  # the paper's "mean ± 95% CI" is over 5 seeds (see the README's "The statistic")
 
+# PGG's arguments at the values that train PPO (a constant γ_train of 1, the whole observation nulled).
+PGG_REFERENCE = {"guidance": 1.0, "guidance_schedule": "constant", "guidance_final": None, "guidance_kl_target": None,
+                 "guidance_bounds": (1.0, 1.5), "cond_dropout": 0.0}  # fmt: skip
 # The training arguments a configuration is named against (config_label): CleanRL's defaults for
 # ppo.py and ppo_continuous_action.py (its `gamma` is our `discount`), with our PGG arguments at PPO.
 # Frozen here, as data: changing a script's default neither renames nor splits an old experiment.
@@ -24,37 +63,41 @@ REFERENCE_ARGS = {
         "total_timesteps": 500_000, "learning_rate": 2.5e-4, "num_envs": 4, "num_steps": 128, "anneal_lr": True,
         "discount": 0.99, "gae_lambda": 0.95, "num_minibatches": 4, "update_epochs": 4, "norm_adv": True,
         "clip_coef": 0.2, "clip_vloss": True, "ent_coef": 0.01, "vf_coef": 0.5, "max_grad_norm": 0.5,
-        "target_kl": None, "guidance": 1.0, "cond_dropout": 0.0,
+        "target_kl": None, **PGG_REFERENCE,
     },
     "continuous": {
         "total_timesteps": 1_000_000, "learning_rate": 3e-4, "num_envs": 1, "num_steps": 2048, "anneal_lr": True,
         "discount": 0.99, "gae_lambda": 0.95, "num_minibatches": 32, "update_epochs": 10, "norm_adv": True,
         "clip_coef": 0.2, "clip_vloss": True, "ent_coef": 0.0, "vf_coef": 0.5, "max_grad_norm": 0.5,
-        "target_kl": None, "obs_clip": 10.0, "reward_clip": 10.0, "guidance": 1.0, "cond_dropout": 0.0,
+        "target_kl": None, "obs_clip": 10.0, "reward_clip": 10.0, **PGG_REFERENCE, "null_dims": None,
     },
 }  # fmt: skip
 
 
-def variant_id(train_guidance: float, cond_dropout: float) -> str:
-    """`ppo`, `pgg_g1.1`, `pgg_drop0.1`, `pgg_g1.1_drop0.1`: a run's variant from its two PGG arguments."""
-    train_guidance, cond_dropout = float(train_guidance), float(cond_dropout)
-    if cond_dropout == 0:
-        return "ppo" if train_guidance == 1.0 else f"pgg_g{train_guidance:g}"
-    return f"pgg_drop{cond_dropout:g}" if train_guidance == 1.0 else f"pgg_g{train_guidance:g}_drop{cond_dropout:g}"
-
-
 def paper_name(variant: str) -> str:
-    """The paper's name of a variant: ppo -> PPO, pgg_g1.1 -> PGG, γ_train = 1.1, pgg_drop0.1 -> PGG, dropout 0.1."""
+    """The paper's name of a variant (ppo -> PPO, pgg_g1.1 -> PGG, γ_train = 1.1, pgg_drop0.1 -> PGG,
+    dropout 0.1), and a name in its words for the others (pgg_g1to1.2 -> PGG, γ_train 1 → 1.2;
+    pgg_adaptive1.1_kl0.02 -> PGG, adaptive γ_train from 1.1, KL target 0.02; ..._goal -> ..., goal null)."""
     if variant == "ppo":
         return "PPO"
     if not variant.startswith("pgg_"):
         return variant
     parts = []
     for part in variant[4:].split("_"):
-        if part.startswith("g"):
+        if part.startswith("g") and "to" in part:
+            parts.append("γ_train {} → {}".format(*part[1:].split("to")))
+        elif part.startswith("g") and part != "goal":
             parts.append(f"γ_train = {part[1:]}")
+        elif part.startswith("adaptive"):
+            parts.append(f"adaptive γ_train from {part[8:]}")
+        elif part.startswith("kl"):
+            parts.append(f"KL target {part[2:]}")
         elif part.startswith("drop"):
             parts.append(f"dropout {part[4:]}")
+        elif part == "goal":
+            parts.append("goal null")
+        elif part.startswith("null"):
+            parts.append(f"null on dims {part[4:]}")
         else:
             parts.append(part)
     return "PGG, " + ", ".join(parts)

@@ -25,8 +25,10 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from pgg_utils.arguments import ARGUMENT_RULES, guidance_error, run_name_error, training_arguments
+from pgg_utils.arguments import ARGUMENT_RULES, run_name_error, training_arguments
 from pgg_utils.files import InputError, LockedError, lock_directory, write_atomic
+from pgg_utils.guidance import schedule_error
+from pgg_utils.identity import run_name
 from pgg_utils.progress import Progress
 
 # 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
@@ -41,7 +43,7 @@ def argument_error(args, kind: str) -> str | None:
     for name, (holds, requirement) in ARGUMENT_RULES.items():
         if hasattr(args, name) and not holds(getattr(args, name)):
             return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
-    if error := guidance_error(args.guidance) or run_name_error(args.run_name):
+    if error := schedule_error(args) or run_name_error(args.run_name):
         return error
     batch_size = args.num_envs * args.num_steps
     if args.num_minibatches <= 0 or batch_size % args.num_minibatches:
@@ -59,11 +61,11 @@ def argument_error(args, kind: str) -> str | None:
         return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
     if args.track and importlib.util.find_spec("wandb") is None:
         return "--track needs Weights and Biases: pip install wandb"
-    return env_error(args.env_id, kind, args.capture_video)
+    return env_error(args.env_id, kind, args.capture_video, getattr(args, "null_dims", None))
 
 
-def env_error(env_id: str, kind: str, capture_video: bool = False) -> str | None:
-    """Why a training script of `kind` cannot train `env_id` here, or None."""
+def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=None) -> str | None:
+    """Why a training script of `kind` cannot train `env_id` here (with the null embedding on `null_dims`), or None."""
     try:
         env = gym.make(env_id, render_mode="rgb_array" if capture_video else None)
     except ImportError as e:
@@ -81,6 +83,9 @@ def env_error(env_id: str, kind: str, capture_video: bool = False) -> str | None
                 f"{wanted.__name__} (use ppo_pgg_{other}.py)")  # fmt: skip
     if kind == "discrete" and not (isinstance(observation_space, gym.spaces.Box) and len(observation_space.shape) == 1):
         return f"{env_id} has a {type(observation_space).__name__} observation space; ppo_pgg_discrete.py needs a vector (1-D Box)"
+    obs_dim = gym.spaces.flatdim(observation_space)
+    if null_dims is not None and not all(0 <= d < obs_dim for d in null_dims):
+        return f"--null-dims must be observation indices of {env_id}, 0..{obs_dim - 1}, got {list(null_dims)}"
     return error
 
 
@@ -410,10 +415,6 @@ class NonFiniteError(Exception):
     """Training produced a NaN or an infinity; the message is one line naming the iteration."""
 
 
-def default_run_name(args) -> str:
-    return f"{args.env_id}__{args.exp_name}__g{args.guidance:g}__p{args.cond_dropout:g}__s{args.seed}"
-
-
 class Run:
     """One training run's directory, locked while this process trains there, and its checkpoints.
 
@@ -423,7 +424,7 @@ class Run:
 
     def __init__(self, args, kind: str, script: Path):
         self.args, self.kind, self.script = args, kind, Path(script)
-        self.dir = Path(args.output_dir) / (args.run_name or default_run_name(args))
+        self.dir = Path(args.output_dir) / (args.run_name or run_name(args))
         self.lock = None
         self.resume_from: Path | None = None
         self.finished = False
@@ -650,10 +651,12 @@ def quiet_event_writer_thread(hook_args) -> None:
     threading.__excepthook__(hook_args)
 
 
-def resume_state(iteration: int, optimizer, envs, next_obs: np.ndarray, next_done: np.ndarray) -> dict:
+def resume_state(iteration: int, optimizer, envs, next_obs: np.ndarray, next_done: np.ndarray, schedule) -> dict:
     """What continuing a run needs besides the model: the optimizer, the sub-envs mid-episode, the
-    next observation and every RNG state."""
+    next observation, every RNG state and, for an adaptive γ_train, the schedule's state."""
+    guidance = {"guidance": schedule.state_dict()} if schedule.kind == "adaptive" else {}
     return {
+        **guidance,
         "iteration": iteration,
         "optimizer": optimizer.state_dict(),
         "envs": env_state(envs),

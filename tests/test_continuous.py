@@ -11,6 +11,7 @@ from conftest import ROOT, small_args, train
 
 import ppo_pgg_continuous as pgg
 from pgg_utils import runs
+from pgg_utils.guidance import uses_null_branch
 from pgg_utils.paper import PAPER_ENVS
 
 PAPER_TASKS = PAPER_ENVS["continuous"]
@@ -67,7 +68,8 @@ def null_grad(guidance, cond_dropout):
     with torch.no_grad():
         buf.logprobs.copy_(pgg.gaussian_log_prob(buf.actions, torch.zeros(2), agent.actor_logstd))
     args = pgg.Args(guidance=guidance, cond_dropout=cond_dropout, update_epochs=1, num_minibatches=1)
-    pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 1), torch.randn(32, 1), args)
+    guidance = torch.tensor(args.guidance) if uses_null_branch(args) else None  # as train() decides
+    pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 1), torch.randn(32, 1), args, guidance)
     return agent.null_obs.grad
 
 
@@ -78,8 +80,8 @@ def test_null_embedding_gradient_only_when_guidance_differs_from_one_or_dropout(
 
 
 class VanillaAgent(pgg.Agent):
-    def __init__(self, obs_dim, action_dim, obs_clip=10.0):
-        super().__init__(obs_dim, action_dim, obs_clip)
+    def __init__(self, obs_dim, action_dim, obs_clip=10.0, null_dims=None, action_bounds=None):
+        super().__init__(obs_dim, action_dim, obs_clip, null_dims, action_bounds)
         del self.null_obs
 
     def unconditional_mean(self):

@@ -9,6 +9,7 @@ from torch import nn
 
 import ppo_pgg_discrete as pgg
 from pgg_utils import runs
+from pgg_utils.guidance import uses_null_branch
 
 
 def tiny_args(tmp_path, **overrides) -> pgg.Args:
@@ -114,7 +115,8 @@ def null_grad_after_update(guidance, cond_dropout):
     buf.actions.random_(0, 2)
     buf.logprobs.fill_(np.log(0.5))
     args = pgg.Args(guidance=guidance, cond_dropout=cond_dropout, update_epochs=1, num_minibatches=1)
-    pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 2), torch.randn(32, 2), args)
+    guidance = torch.tensor(args.guidance) if uses_null_branch(args) else None  # as train() decides
+    pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 2), torch.randn(32, 2), args, guidance)
     grad = agent.null_obs.grad
     return (None if grad is None else grad.clone()), agent.null_obs.detach().clone()
 

@@ -133,7 +133,7 @@ def test_flat_fused_adam_update_matches_per_tensor_adam():
             )
         else:
             optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5, foreach=False)
-        discrete.ppo_update(agent, optimizer, buf, advantages, returns, args)
+        discrete.ppo_update(agent, optimizer, buf, advantages, returns, args, torch.tensor(args.guidance))
         results.append(agent.state_dict())
     for key in results[0]:
         assert not torch.equal(results[0][key], initial[key]), (
@@ -173,7 +173,7 @@ def test_compiled_minibatch_loss_matches_eager(module):
     results = []
     for loss_fn in (module.minibatch_loss, torch.compile(module.minibatch_loss)):
         agent.zero_grad()
-        loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, args)
+        loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, torch.tensor(args.guidance), args)
         loss.backward()
         results.append((loss.detach(), stats, {name: p.grad.clone() for name, p in agent.named_parameters()}))
     (eager_loss, eager_stats, eager_grads), (compiled_loss, compiled_stats, compiled_grads) = results

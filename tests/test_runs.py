@@ -19,7 +19,7 @@ from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, 
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import files, progress, runs
+from pgg_utils import files, identity, progress, runs
 from pgg_utils.files import lock_directory
 
 
@@ -126,7 +126,7 @@ def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_pre
         and "No space left on device" in error[0]
         and "step_000000512.pt are kept" in error[0]
     )
-    run_dir = tmp_path / runs.default_run_name(args)
+    run_dir = tmp_path / identity.run_name(args)
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
     ppo_pgg_discrete.load_checkpoint(run_dir / "checkpoints" / "step_000000512.pt")
 
@@ -338,7 +338,7 @@ def test_kl_statistics_cover_kept_rows_only(kind):
     batch = {"obs": buf.obs[:, 0], "actions": buf.actions[:, 0], "logprobs": buf.logprobs[:, 0],
              "advantages": torch.randn(256), "returns": torch.randn(256), "values": torch.zeros(256)}  # fmt: skip
     drop_mask = torch.rand(256) < args.cond_dropout
-    _, stats = module.minibatch_loss(agent, batch, torch.arange(256), drop_mask, args)
+    _, stats = module.minibatch_loss(agent, batch, torch.arange(256), drop_mask, torch.tensor(args.guidance), args)
     assert abs(stats["losses/approx_kl"].item()) < 1e-6 and abs(stats["losses/old_approx_kl"].item()) < 1e-5
     assert stats["losses/clipfrac"].item() == 0.0
     assert (
@@ -409,7 +409,7 @@ def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_fi
     code, error = launch(ppo_pgg_discrete, args, capsys)
     assert code == 1 and len(error) == 1, error
     assert "iteration 3 (global step 768): non-finite weights; checkpoints up to step_000000512.pt are kept" in error[0]
-    run_dir = tmp_path / runs.default_run_name(args)
+    run_dir = tmp_path / identity.run_name(args)
     assert [p.name for p in runs.checkpoints_of(run_dir)] == ["step_000000512.pt"]
     # A checkpoint with non-finite weights (from elsewhere) is never continued.
     ckpt = checkpoint(run_dir, 512)
@@ -486,7 +486,7 @@ def test_a_full_disk_under_tensorboard_is_one_line_naming_the_run_directory(tmp_
     args = small_args("discrete", tmp_path)
     code, error = launch(ppo_pgg_discrete, args, capsys)
     assert code == 1 and len(error) == 1, error
-    assert error[0] == f"error: cannot write in {tmp_path / runs.default_run_name(args)}: No space left on device"
+    assert error[0] == f"error: cannot write in {tmp_path / identity.run_name(args)}: No space left on device"
 
 
 def test_a_refused_resume_sets_nothing_aside(tmp_path):

@@ -142,13 +142,20 @@ def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monk
     assert all(line in episodes for line in cell_lines)  # each cell row, its checksum left out
 
 
+def guided_branch(agent, ckpt, raw, guidance, uniform_null=False):
+    """The guided logits or means the sweep's GuidedPolicy acts on."""
+    null = sweep.GuidedPolicy(agent, ckpt, uniform_null).null
+    if ckpt["action_space"] == "continuous":
+        return agent.acting_mean(raw, guidance, **null)
+    return agent.acting_logits(raw.astype(np.float32), guidance, **null)
+
+
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
     agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, kind))
-    policy = sweep.GuidedPolicy(agent, ckpt)
     raw = np.random.default_rng(0).normal(size=(16, ckpt["obs_dim"])) * 0.5
     guidance = ckpt["args"]["guidance"]
-    evaluated = policy.guided(raw, np.full(16, guidance))
+    evaluated = torch.from_numpy(guided_branch(agent, ckpt, raw, guidance))
     # The mixture that acted in training rollouts (numpy, on the actor's output), and the policy PPO
     # optimised (torch.lerp, equal to the last bit or so).
     with torch.no_grad():
@@ -204,8 +211,8 @@ def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, 
 def test_uniform_null_control_is_temperature_scaling(runs):
     agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, "discrete"))
     raw = np.random.default_rng(1).normal(size=(10, 4)) * 0.1
-    learned = sweep.GuidedPolicy(agent, ckpt).guided(raw, np.full(10, 3.0)).softmax(-1)
-    uniform = sweep.GuidedPolicy(agent, ckpt, uniform_null=True).guided(raw, np.full(10, 3.0)).softmax(-1)
+    learned = torch.from_numpy(guided_branch(agent, ckpt, raw, 3.0)).softmax(-1)
+    uniform = torch.from_numpy(guided_branch(agent, ckpt, raw, 3.0, uniform_null=True)).softmax(-1)
     with torch.no_grad():
         tempered = (3.0 * agent.actor(torch.as_tensor(raw, dtype=torch.float32))).softmax(-1)
     torch.testing.assert_close(uniform, tempered)

@@ -1,0 +1,278 @@
+"""A researcher's first changes must work, or stop with one line: a γ_train schedule, an adaptive
+γ_train, a bigger actor, a new argument, a goal-conditioned null embedding, acting with a loaded agent."""
+
+import dataclasses
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+import torch._dynamo.testing
+import tyro
+from conftest import SCRIPTS, one_line_error, run_script, small_args, train
+from torch import nn
+
+import eval_gamma_sweep as sweep
+import ppo_pgg_continuous
+import ppo_pgg_discrete
+from pgg_utils import fast, identity, paper, runs
+from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
+from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
+from pgg_utils.paper import GOAL_DIMS, REFERENCE_ARGS
+
+LINEAR = {"guidance": 1.0, "guidance_schedule": "linear", "guidance_final": 1.3, "cond_dropout": 0.0}
+
+
+def logged(run_dir, tag: str) -> list[float]:
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
+    events.Reload()
+    return [e.value for e in events.Scalars(tag)]
+
+
+def load(run_dir, mark) -> dict:
+    return torch.load(runs.checkpoint_path(run_dir, mark), weights_only=True)
+
+
+# --- the training γ: a schedule with one owner ----------------------------------------------------
+
+
+def test_a_linear_schedule_from_one_trains_the_null_embedding_and_is_named_for_what_it_is(tmp_path):
+    args = small_args("discrete", tmp_path, **LINEAR)
+    run_dir = train(ppo_pgg_discrete, args)
+    assert run_dir.name == "CartPole-v1__ppo_pgg__g1to1.3__p0__s1"
+    # γ_train rises linearly from 1 at the first iteration to 1.3 at the last, as logged
+    np.testing.assert_allclose(logged(run_dir, "pgg/guidance"), np.linspace(1.0, 1.3, 6), rtol=1e-6)
+    ckpt = load(run_dir, 1536)
+    assert ckpt["model"]["null_obs"].abs().sum() > 0  # γ_train = 1 at the start, yet the null branch trains
+    run = identity.run_identity(ckpt["args"], "discrete")
+    assert run.variant == "pgg_g1to1.3" and run.name == "PGG, γ_train 1 → 1.3" and not run.in_paper
+    assert identity.config_label(ckpt) == "pgg_g1to1.3 num_steps=64 total_timesteps=1536"
+
+
+def test_constant_guidance_one_without_dropout_leaves_the_null_embedding_out(tmp_path):
+    ckpt = load(train(ppo_pgg_discrete, small_args("discrete", tmp_path, guidance=1.0, cond_dropout=0.0)), 1536)
+    assert torch.equal(ckpt["model"]["null_obs"], torch.zeros(4))
+    assert identity.run_identity(ckpt["args"], "discrete").variant == "ppo"
+
+
+@pytest.mark.parametrize("schedule", ["linear", "adaptive"])
+def test_a_scheduled_run_resumes_bit_for_bit_and_refuses_another_schedule(tmp_path, schedule):
+    flags = LINEAR if schedule == "linear" else {"guidance": 1.1, "guidance_schedule": "adaptive",
+                                                 "guidance_kl_target": 1e-4, "cond_dropout": 0.0}  # fmt: skip
+    args = small_args("discrete", tmp_path, **flags, run_name="straight")
+    straight = train(ppo_pgg_discrete, args)
+    stopped = tmp_path / "stopped"
+    stopped.mkdir()
+    (stopped / "checkpoints").mkdir()
+    for mark in (512, 1024):
+        (stopped / "checkpoints" / runs.checkpoint_path(stopped, mark).name).write_bytes(
+            runs.checkpoint_path(straight, mark).read_bytes()
+        )
+    train(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True))
+    a, b = load(straight, 1536), load(stopped, 1536)
+    assert all(torch.equal(a["model"][k], b["model"][k]) for k in a["model"])
+    if schedule == "adaptive":
+        assert a["resume"]["guidance"] == b["resume"]["guidance"]
+    changed = replace(args, guidance_final=1.2) if schedule == "linear" else replace(args, guidance_kl_target=2e-4)
+    with pytest.raises(runs.RunDirError, match="other arguments"):
+        train(ppo_pgg_discrete, replace(changed, run_name="stopped", resume=True))
+
+
+def test_the_adaptive_rule_holds_the_kl_near_its_target_within_bounds():
+    args = ppo_pgg_discrete.Args(guidance=1.2, guidance_schedule="adaptive", guidance_kl_target=0.01,
+                                 guidance_bounds=(1.0, 1.5))  # fmt: skip
+    schedule = GuidanceSchedule(args, 10)
+    kl = lambda value: {"pgg/kl_guided_vs_conditional": value}
+    schedule.observe(kl(0.01))  # within [target / 1.5, target · 1.5]: held
+    assert schedule.value(2) == 1.2
+    schedule.observe(kl(0.1))  # too far from the conditional policy: the strength γ - 1 shrinks
+    assert schedule.value(3) == pytest.approx(1 + 0.2 / ADAPTIVE_STEP)
+    for _ in range(20):
+        schedule.observe(kl(0.0))  # guidance changes nothing: the strength grows, up to the bound
+    assert schedule.value(4) == 1.5
+
+
+def test_an_adaptive_run_logs_the_gamma_its_rule_chose(tmp_path):
+    args = small_args("discrete", tmp_path, guidance=1.1, guidance_schedule="adaptive", guidance_kl_target=1e-6,
+                      cond_dropout=0.0)  # fmt: skip
+    run_dir = train(ppo_pgg_discrete, args)
+    gammas, kls = logged(run_dir, "pgg/guidance"), logged(run_dir, "pgg/kl_guided_vs_conditional")
+    assert gammas[0] == pytest.approx(1.1) and run_dir.name == "CartPole-v1__ppo_pgg__adaptive1.1_kl1e-06__p0__s1"
+    for gamma, kl, following in zip(gammas, kls, gammas[1:]):  # each step of the rule, from what was logged
+        strength = gamma - 1
+        expected = (
+            strength / ADAPTIVE_STEP if kl > 1.5e-6 else strength * ADAPTIVE_STEP if kl < 1e-6 / 1.5 else strength
+        )
+        assert following == pytest.approx(min(max(1 + expected, 1.0), 1.5), rel=1e-6)
+    assert identity.run_identity(load(run_dir, 1536)["args"], "discrete").variant == "pgg_adaptive1.1_kl1e-06"
+
+
+@pytest.mark.parametrize(
+    "flags,message",
+    [
+        (["--guidance-final", "1.2"], "--guidance-final goes with --guidance-schedule linear"),
+        (["--guidance-schedule", "linear"], "--guidance-final goes with --guidance-schedule linear"),
+        (["--guidance-schedule", "linear", "--guidance-final", "-5"], "--guidance-final must be a number in [0, 1000]"),
+        (["--guidance-schedule", "adaptive", "--guidance-kl-target", "0.01"], "needs 1 <= low <= --guidance <= high"),
+        (["--guidance-bounds", "1", "2"], "--guidance-bounds goes with --guidance-schedule adaptive"),
+    ],
+)
+def test_guidance_flags_are_checked_in_one_line(tmp_path, flags, message):
+    proc = run_script("ppo_pgg_discrete.py", "--output-dir", str(tmp_path), "--total-timesteps", "512", *flags)
+    assert message in one_line_error(proc)
+    assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("module", [ppo_pgg_discrete, ppo_pgg_continuous], ids=["discrete", "continuous"])
+def test_a_new_gamma_value_compiles_nothing(module):
+    """--compile: γ_train enters the compiled loss as a tensor, so a schedule over 10 values is one graph."""
+    torch.manual_seed(0)
+    agent, counter = module.Agent(4, 2), torch._dynamo.testing.CompileCounter()
+    batch = {"obs": torch.randn(64, 4), "logprobs": torch.randn(64), "advantages": torch.randn(64),
+             "returns": torch.randn(64), "values": torch.randn(64),
+             "actions": torch.randint(0, 2, (64,)) if module is ppo_pgg_discrete else torch.randn(64, 2)}  # fmt: skip
+    compiled = torch.compile(module.minibatch_loss, backend=counter)
+    torch._dynamo.reset()
+    for gamma in np.linspace(1.0, 1.3, 10):
+        compiled(agent, batch, torch.arange(32), None, torch.tensor(gamma, dtype=torch.float32), module.Args())
+    assert counter.frame_count == 1
+
+
+# --- a bigger actor: the numpy copy follows the module, or steps aside ---------------------------
+
+
+def with_layer_norm(agent, network: str):
+    """The researcher's edit: LayerNorm before each Tanh of the actor."""
+    old = getattr(agent, network)
+    layers = []
+    for layer in old:
+        if isinstance(layer, nn.Tanh):
+            layers.append(nn.LayerNorm(layers[-1].out_features))
+        layers.append(layer)
+    setattr(agent, network, nn.Sequential(*layers))
+    return agent
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_an_actor_with_layer_norm_acts_as_its_module_and_the_first_ratio_is_one(kind, monkeypatch, tmp_path):
+    """Rollouts act through the module's own forward where the numpy copy does not know a layer, so
+    the rollout's log-probabilities are the update's: on the first minibatch every ratio is 1."""
+    module = SCRIPTS[kind]
+    network = "actor" if kind == "discrete" else "actor_mean"
+    real_agent = module.Agent
+    monkeypatch.setattr(module, "Agent", lambda *a, **k: with_layer_norm(real_agent(*a, **k), network))
+    first = {}
+    real_update = module.ppo_update
+
+    def first_minibatch(agent, optimizer, buf, advantages, returns, args, guidance, loss_fn=module.minibatch_loss):
+        if not first:
+            batch = {"obs": buf.obs.reshape(-1, buf.obs.shape[-1]), "logprobs": buf.logprobs.reshape(-1),
+                     "actions": buf.actions.reshape(-1, *buf.actions.shape[2:]), "advantages": advantages.reshape(-1),
+                     "returns": returns.reshape(-1), "values": buf.values.reshape(-1)}  # fmt: skip
+            first.update(module.minibatch_loss(agent, batch, torch.arange(64), None, guidance, args)[1])
+        return real_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_fn)
+
+    monkeypatch.setattr(module, "ppo_update", first_minibatch)
+    run_dir = train(module, small_args(kind, tmp_path, guidance=1.3, cond_dropout=0.0))
+    assert first["losses/clipfrac"].item() == 0.0 and abs(first["losses/approx_kl"].item()) < 1e-6
+    # the sweep acts through the same module: its deterministic action is the module's guided output
+    agent, ckpt = sweep.load_any_checkpoint(runs.checkpoints_of(run_dir)[-1])
+    assert any(isinstance(m, nn.LayerNorm) for m in getattr(agent, network))
+    raw = np.random.default_rng(0).normal(size=(8, ckpt["obs_dim"]))
+    with torch.no_grad():
+        if kind == "discrete":
+            expected = agent.guided_logits(torch.as_tensor(raw, dtype=torch.float32), 1.3).argmax(-1).numpy()
+        else:
+            expected = agent.guided_mean(agent.obs_norm(raw), 1.3).clamp(-0.4, 0.4).numpy()
+    policy = sweep.GuidedPolicy(agent, ckpt)
+    actions = policy.act(raw, np.full(8, 1.3), None, deterministic=True)
+    np.testing.assert_allclose(actions, expected, rtol=1e-5, atol=1e-6)
+
+
+def test_the_numpy_copy_is_checked_against_its_module(monkeypatch):
+    actor = ppo_pgg_discrete.Agent(4, 2).actor
+    fast.numpy_network(actor)  # the copy of Linear and Tanh holds
+    monkeypatch.setitem(fast.NUMPY_ACTIVATIONS, nn.Tanh, lambda x: x)  # a copy that treats Tanh wrongly
+    with pytest.raises(ValueError, match=r"numpy copy of the network \(Linear, Tanh, Linear, Tanh, Linear\) disagrees"):
+        fast.numpy_network(actor)
+
+
+# --- an argument is one change -------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_every_training_argument_is_in_the_reference_and_has_a_rule(kind):
+    """A new field of Args must be added to pgg_utils/paper.py's REFERENCE_ARGS (at the value that trains
+    as before it existed) and to pgg_utils/arguments.py's ARGUMENT_RULES; this test says which is missing."""
+    training = {f.name for f in dataclasses.fields(SCRIPTS[kind].Args)} - RUN_ONLY_ARGS - {"env_id", "seed"}
+    assert not training - REFERENCE_ARGS[kind].keys(), f"add to REFERENCE_ARGS[{kind!r}]"
+    assert not training - ARGUMENT_RULES.keys(), "add to ARGUMENT_RULES"
+    assert not REFERENCE_ARGS[kind].keys() - training, "REFERENCE_ARGS names an argument the script lacks"
+    defaults = dataclasses.asdict(SCRIPTS[kind].Args())
+    for name in training:  # today's defaults pass their own rule
+        assert ARGUMENT_RULES[name][0](defaults[name]), name
+
+
+# --- guidance on a goal --------------------------------------------------------------------------
+
+
+def test_a_goal_null_embedding_replaces_only_the_goal_dimensions():
+    agent = ppo_pgg_continuous.Agent(11, 2, null_dims=GOAL_DIMS["Reacher-v4"])
+    with torch.no_grad():
+        agent.null_obs.fill_(7.0)
+    obs = torch.randn(5, 11)
+    nulled = agent.null_input(obs)
+    goal = list(GOAL_DIMS["Reacher-v4"])
+    rest = [d for d in range(11) if d not in goal]
+    assert (nulled[:, goal] == 7.0).all() and torch.equal(nulled[:, rest], obs[:, rest])
+    np.testing.assert_array_equal(agent.null_input(obs.numpy()), nulled.detach().numpy())
+    with torch.no_grad():  # the rollouts' numpy policy and the update's torch one agree
+        policy = ppo_pgg_continuous.RolloutPolicy(agent, 1.5)
+        noise = np.zeros((5, 2), np.float32)
+        actions, _, _ = policy.act(obs.numpy(), noise)
+        torch.testing.assert_close(torch.from_numpy(actions), agent.guided_mean(obs, 1.5), rtol=1e-5, atol=1e-6)
+    args = {**REFERENCE_ARGS["continuous"], "env_id": "Reacher-v4", "guidance": 1.1, "null_dims": goal}
+    assert identity.variant_id(args) == "pgg_g1.1_goal"
+    assert identity.variant_id({**args, "null_dims": [4, 5]}) == "pgg_g1.1_null4-5"
+    assert identity.variant_id({**args, "guidance": 1.0}) == "ppo"  # without guidance the null is unused
+
+
+def test_goal_dimensions_outside_the_observation_are_refused(tmp_path):
+    proc = run_script("ppo_pgg_continuous.py", "--env-id", "Reacher-v4", "--guidance", "1.1", "--null-dims", "4", "11",
+                      "--output-dir", str(tmp_path))  # fmt: skip
+    assert one_line_error(proc) == "error: --null-dims must be observation indices of Reacher-v4, 0..10, got [4, 11]"
+
+
+# --- act from a loaded agent ---------------------------------------------------------------------
+
+
+def test_act_from_a_loaded_agent_is_the_sweeps_policy(tmp_path):
+    run_dir = train(ppo_pgg_continuous, small_args("continuous", tmp_path))
+    agent, ckpt = ppo_pgg_continuous.load_checkpoint(runs.checkpoints_of(run_dir)[-1])
+    import gymnasium as gym
+
+    env = gym.make(ckpt["env_id"])
+    raw, _ = env.reset(seed=0)
+    mean = agent.act(raw, guidance=1.2, deterministic=True)
+    assert mean.shape == env.action_space.shape and np.abs(mean).max() <= 0.4  # Humanoid's bounds
+    noise = np.random.default_rng(0).standard_normal((1, mean.shape[0])).astype(np.float32)
+    policy = sweep.GuidedPolicy(agent, ckpt)
+    np.testing.assert_array_equal(agent.act(raw[None], 1.2, noise=noise), policy.act(raw[None], np.array([1.2]), noise,
+                                                                                    False))  # fmt: skip
+    torch.manual_seed(0)
+    sampled = agent.act(raw, guidance=1.2)
+    torch.manual_seed(0)
+    assert np.array_equal(sampled, agent.act(raw, guidance=1.2)) and not np.array_equal(sampled, mean)
+
+
+@pytest.mark.parametrize("variant", [*paper.VARIANTS, *paper.BEYOND_VARIANTS])
+def test_the_launchers_variants_are_named_by_their_flags(variant):
+    """reproduce.py names a run by its variant id; the flags it trains with must give that same id."""
+    env_id = "Reacher-v4"
+    flags = paper.variant_flags(variant, env_id)
+    module = ppo_pgg_continuous
+    args = tyro.cli(module.Args, args=["--env-id", env_id, *flags])
+    assert identity.run_identity({**dataclasses.asdict(args)}, "continuous").variant == variant
+    assert identity.run_identity(dataclasses.asdict(args), "continuous").in_paper == (variant in paper.VARIANTS)
