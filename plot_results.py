@@ -715,7 +715,7 @@ def manifest_names(output: Path, paths) -> set[str]:
 
 
 def main() -> None:
-    args = tyro.cli(Args)
+    args = tyro.cli(Args, description=__doc__)
     try:
         written = generate(args)
     except InputError as e:
