@@ -583,7 +583,7 @@ def record_videos(args: Args) -> list[Path]:
 
 
 def main() -> None:
-    args = tyro.cli(Args)
+    args = tyro.cli(Args, description=__doc__)
     try:
         if args.video is not None:
             check_args(args)

@@ -31,8 +31,10 @@ Writes into --output (and prints each path):
   gamma_response_<kind>.png/pdf return against eval γ at one step, one line per variant
   learning_curves.png/pdf       (--runs) episodic training return against steps, mean and CI over seeds
   best_gamma.md / .csv          the best eval γ per env, variant and step
-  aggregate_iqm.md / .csv       interquartile mean over envs and seeds of min-max normalised scores,
-                                with stratified-bootstrap 95% CIs (scipy.stats.bootstrap)
+  aggregate_iqm.md / .csv       interquartile mean over envs and seeds of scores normalised by fixed
+                                references (0 = the paper's PPO at its first step, 1 = at its last),
+                                with stratified-bootstrap 95% CIs (scipy.stats.bootstrap);
+                                aggregate_iqm_<kind>.png/pdf draws the last step's as intervals
   compare_paper.md / .csv       (--compare-paper) the agreement report: per paper cell Welch's t test
                                 on the two summaries, Holm-corrected over the cells of one table,
                                 effect sizes, CI overlap and the gap its test detects 80% of the time;
@@ -70,6 +72,7 @@ from pgg_utils.agreement import (
     compare_with_paper,
     comparison_markdown,
     other_mujoco,
+    paper_ppo_span,
     series_id,
     step_label,
     task_summaries,
@@ -590,17 +593,17 @@ def iqm_along(*samples, axis=-1):
 
 
 def aggregate_iqm(summary) -> list[dict]:
-    """Per (variant, step, eval γ): IQM over (env, seed) of per-seed mean returns, min-max normalised per
-    env and step over all cells of the sweep (0 = worst cell mean, 1 = best). 95% CI by a stratified
-    percentile bootstrap: seeds are resampled within each env (scipy.stats.bootstrap, one sample per env)."""
-    bounds = {}
-    for r in summary:
-        key = (r["env_id"], int(r["step"]))
-        lo, hi = bounds.get(key, (math.inf, -math.inf))
-        bounds[key] = (min(lo, float(r["mean"])), max(hi, float(r["mean"])))
+    """Per (variant, step, eval γ): IQM over (env, seed) of per-seed mean returns, normalised per env by
+    fixed references, the paper's PPO at the first and the last step of its table (0 and 1;
+    agreement.paper_ppo_span), so that adding a γ or a variant moves no score; a task the paper did not
+    run is left out. 95% CI by a stratified percentile bootstrap: seeds are resampled within each env
+    (scipy.stats.bootstrap, one sample per env)."""
+    span = paper_ppo_span()
     groups = defaultdict(list)
     for r in summary:
-        lo, hi = bounds[(r["env_id"], int(r["step"]))]
+        if r["env_id"] not in span:
+            continue
+        lo, hi = span[r["env_id"]]
         seed_means = np.array([float(x) for x in r["seed_means"].split(";")])
         groups[(series_id(r["variant"], r["series"]), int(r["step"]), float(r["eval_guidance"]))].append(
             (seed_means - lo) / ((hi - lo) or 1.0)
@@ -681,7 +684,9 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
             swept = {float(r["eval_guidance"]) for r in rows if r["variant"] == variant}
             low, high = PAPER_FIGURE_GAMMAS.get((kind, variant), (-math.inf, math.inf))
             inside = {g for g in swept if low <= g <= high}
-            figure = figures.figure_for_variant(rows, envs, variant, layout, cols, gammas=inside)
+            beside_paper = PAPER_FIGURE_GAMMAS.get((kind, variant)) and args.paper_layout
+            y_limits = figures.PAPER_DROPOUT_FIGURE_YLIM if beside_paper else None
+            figure = figures.figure_for_variant(rows, envs, variant, layout, cols, gammas=inside, y_limits=y_limits)
             save_figure(figure, output / f"fig_{kind}_{variant}", written)
             if swept - inside:
                 rest = sorted(swept - inside)
@@ -696,8 +701,12 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     write_csv(output / "best_gamma.csv", best, written)
     write(output / "best_gamma.md", simple_markdown(best), written)
     aggregate = aggregate_iqm(summary)
-    write_csv(output / "aggregate_iqm.csv", aggregate, written)
-    write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
+    if aggregate:
+        write_csv(output / "aggregate_iqm.csv", aggregate, written)
+        write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
+        for kind in sorted({r["kind"] for r in summary if r["env_id"] in paper_ppo_span()}):
+            of_kind = aggregate_iqm([r for r in summary if r["kind"] == kind])
+            save_figure(figures.aggregate_intervals(of_kind, kind), output / f"aggregate_iqm_{kind}", written)
     if args.runs:
         save_figure(figures.learning_curves(training_curves(args.runs)), output / "learning_curves", written)
     if args.compare_paper:
@@ -716,7 +725,7 @@ def manifest_names(output: Path, paths) -> set[str]:
 
 
 def main() -> None:
-    args = tyro.cli(Args)
+    args = tyro.cli(Args, description=__doc__)
     try:
         written = generate(args)
     except InputError as e:

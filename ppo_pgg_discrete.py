@@ -537,7 +537,7 @@ def load_checkpoint(path) -> tuple[Agent, dict]:
 
 
 def main() -> None:
-    args = tyro.cli(Args)
+    args = tyro.cli(Args, description=__doc__)
     runs.launch(args, ACTION_SPACE, __file__, train)
 
 

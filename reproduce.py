@@ -430,7 +430,7 @@ def readme_rows(readme: Path) -> dict[str, str]:
 
 
 def main() -> None:
-    args = tyro.cli(Args)
+    args = tyro.cli(Args, description=__doc__)
 
     def stop(signum, _frame):
         # End the training children with us, so that none writes into a run directory after we are gone

@@ -25,11 +25,25 @@ RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "Inver
                 "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
 MARKERS = "osD^vPX*hp<>"
 # The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
-# variants fixed, any other a fixed colour of its name) and one per eval γ (viridis by the γ's place in
-# its table's grid of the paper, PAPER_GAMMAS; between grid points by log γ, past its ends the end colours).
+# variants fixed, any other a fixed colour of its name) and one per eval γ. An eval γ takes the colour the
+# paper's figures give it: viridis by its place in the γ set of the paper's figure of its kind (between
+# them by log γ), the span measured on the paper's figures' legend colours. The continuous figure draws
+# only 1.0-1.2; the table's other γ (1.25, 1.3, 1.5) take plasma's magentas, which no other line uses.
 VARIANT_COLOURS = {"ppo": "black", "pgg_g1.1": "C1", "pgg_drop0.1": "C2"}
 OTHER_VARIANT_COLOURS = ("C0", "C3", "C4", "C5", "C6", "C8", "C9")
-GAMMA_CMAP, GAMMA_CMAP_SPAN = "viridis", (0.0, 0.9)  # the paper's: dark for γ = 1, light green for its largest γ
+GAMMA_CMAP, GAMMA_CMAP_SPAN = (
+    "viridis",
+    (0.12, 0.88),
+)  # the paper's: dark purple for γ = 1, yellow-green for its largest
+PAPER_FIGURE_GAMMAS = {"discrete": PAPER_GAMMAS["discrete"], "continuous": (1.0, 1.05, 1.1, 1.15, 1.2)}
+BEYOND_FIGURE_CMAP, BEYOND_FIGURE_SPAN = "plasma", (0.3, 0.55)
+# The y-limits of the paper's continuous dropout figure's panels (read off its axes with the calibration
+# of data/read_dropout_figure.py): our figure beside it uses them, widened where our means need it.
+PAPER_DROPOUT_FIGURE_YLIM = {"HalfCheetah-v4": (657.0, 2182.0), "Hopper-v4": (908.0, 3162.0),
+                             "Humanoid-v4": (403.0, 731.0), "InvertedPendulum-v4": (691.0, 1034.0),
+                             "Pusher-v4": (-104.0, -31.0), "Walker2d-v4": (170.0, 3637.0)}  # fmt: skip
+# Fonts about as large, once a figure is scaled to the paper's width, as the paper's.
+TITLE_SIZE, LABEL_SIZE, TICK_SIZE, LEGEND_SIZE = 11, 10, 9, 9
 LINE_STYLES = ("-", "--", ":", "-.")  # several configurations of one variant in one colour
 
 
@@ -91,10 +105,10 @@ def steps_formatter(x, _pos) -> str:
 
 
 def style_axis(ax, title: str, xlabel: str, ylabel: str, steps_on_x: bool) -> None:
-    ax.set_title(title, fontsize=9)
-    ax.set_xlabel(xlabel, fontsize=8)
-    ax.set_ylabel(ylabel, fontsize=8)
-    ax.tick_params(labelsize=7)
+    ax.set_title(title, fontsize=TITLE_SIZE)
+    ax.set_xlabel(xlabel, fontsize=LABEL_SIZE)
+    ax.set_ylabel(ylabel, fontsize=LABEL_SIZE)
+    ax.tick_params(labelsize=TICK_SIZE)
     ax.grid(alpha=0.3)
     if steps_on_x:
         ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
@@ -106,15 +120,22 @@ def not_run(ax, env: str) -> None:
     ax.set_yticks([])
     for spine in ax.spines.values():
         spine.set_color("0.8")
-    ax.set_title(env, fontsize=9)
+    ax.set_title(env, fontsize=TITLE_SIZE)
 
 
-def set_y_range(ax, env: str, drawn: list, few: bool = False) -> bool:
+def set_y_range(ax, env: str, drawn: list, few: bool = False, fixed: tuple | None = None) -> bool:
     """Fits the y-axis to the data, but never past the task's possible returns, and, with fewer than 3
-    seeds where the bands dwarf the means (t_{0.975,1} = 12.7), to the means. Marks every band that runs
-    past the axis with a triangle at the edge. Returns whether any band was clipped."""
+    seeds where the bands dwarf the means (t_{0.975,1} = 12.7), to the means; or, given `fixed` (a
+    figure's limits to match), to those, widened to hold every mean. Marks every band that runs past the
+    axis with a triangle at the edge. Returns whether any band was clipped."""
     if not drawn:
         return False
+    if fixed is not None:
+        means = np.concatenate([d[1] for d in drawn])
+        pad, m_lo, m_hi = 0.03 * (fixed[1] - fixed[0]), float(np.nanmin(means)), float(np.nanmax(means))
+        lo = fixed[0] if m_lo >= fixed[0] else m_lo - pad
+        hi = fixed[1] if m_hi <= fixed[1] else m_hi + pad
+        return mark_clipped(ax, drawn, lo, hi)
     means = np.concatenate([d[1] for d in drawn])
     cis = np.concatenate([d[2] for d in drawn])
     lo, hi = float(np.nanmin(means - cis)), float(np.nanmax(means + cis))
@@ -128,6 +149,11 @@ def set_y_range(ax, env: str, drawn: list, few: bool = False) -> bool:
         r_lo, r_hi = RETURN_RANGE[env]
         r_pad = 0.03 * (r_hi - r_lo)
         lo, hi = max(lo, r_lo - r_pad), min(hi, r_hi + r_pad)
+    return mark_clipped(ax, drawn, lo, hi)
+
+
+def mark_clipped(ax, drawn: list, lo: float, hi: float) -> bool:
+    """Sets the y-limits and marks each band past them with a triangle at the edge; whether any was."""
     ax.set_ylim(lo, hi)
     clipped = False
     for xs, ms, hs, colour in drawn:
@@ -140,7 +166,7 @@ def set_y_range(ax, env: str, drawn: list, few: bool = False) -> bool:
 
 
 def clipped_handle():
-    return matplotlib.lines.Line2D([], [], linestyle="none", marker="^", color="0.3", markersize=4,
+    return matplotlib.lines.Line2D([], [], linestyle="none", marker="^", color="0.3", markersize=5,
                                    label="CI runs past the axis (clipped)")  # fmt: skip
 
 
@@ -194,9 +220,15 @@ def gamma_marker(gamma: float, kind: str) -> str:
 
 
 def gamma_colour(gamma: float, kind: str) -> str:
-    """The colour of an eval γ in every figure of its table: its place in the paper's γ grid of the kind."""
-    grid = np.log(PAPER_GAMMAS[kind])
-    place = np.interp(math.log(max(gamma, 1e-12)), grid, np.linspace(*GAMMA_CMAP_SPAN, len(grid)))
+    """The colour of an eval γ in every figure of its table: the paper figure's colour for its place in
+    that figure's γ set; past the set's largest, the table's other γ in BEYOND_FIGURE_CMAP."""
+    shown = PAPER_FIGURE_GAMMAS[kind]
+    beyond = [g for g in PAPER_GAMMAS[kind] if g > shown[-1]]
+    log_gamma = math.log(max(gamma, 1e-12))
+    if beyond and gamma > shown[-1]:
+        place = np.interp(log_gamma, np.log(beyond), np.linspace(*BEYOND_FIGURE_SPAN, len(beyond)))
+        return matplotlib.colors.to_hex(plt.get_cmap(BEYOND_FIGURE_CMAP)(place))
+    place = np.interp(log_gamma, np.log(shown), np.linspace(*GAMMA_CMAP_SPAN, len(shown)))
     return matplotlib.colors.to_hex(plt.get_cmap(GAMMA_CMAP)(place))
 
 
@@ -221,7 +253,13 @@ def legend_right(fig, entries: list, title: str) -> None:
             labels.append(label)
     if handles:
         fig.legend(
-            handles, labels, loc="outside right center", fontsize=7, frameon=False, title=title, title_fontsize=7
+            handles,
+            labels,
+            loc="outside right center",
+            fontsize=LEGEND_SIZE,
+            frameon=False,
+            title=title,
+            title_fontsize=LEGEND_SIZE,
         )
 
 
@@ -241,11 +279,13 @@ def figure_for_variant(
     cols: int | None = None,
     gammas=None,
     title: str | None = None,
+    y_limits: dict | None = None,
 ):
     """The paper's figure: return against training steps per env; PPO solid black (eval γ=1), one
     dashed line per eval γ of `variant` (those in `gammas`, default all), each in its γ's colour and
     marker and with a small sideways offset. Envs of `layout` without data are empty panels labelled
-    "not run". `title`: the figure's, where it is not the variant's whole figure."""
+    "not run". `title`: the figure's, where it is not the variant's whole figure. `y_limits`: env ->
+    the y-limits of the paper's figure this one stands beside (set_y_range's `fixed`)."""
     layout = layout or list(envs)
     cells = cell_index(summary)
     kind = summary[0]["kind"] if summary else "discrete"
@@ -270,7 +310,7 @@ def figure_for_variant(
         for i, series in enumerate(ppo_series):
             points = [(s, cells[(env, "ppo", series, s, 1.0)]) for s in steps if (env, "ppo", series, s, 1.0) in cells]
             if points:
-                label = series_name("ppo", series) + (" (γ = 1)" if variant == "ppo" else "")
+                label = series_name("ppo", series) + " (γ = 1)"  # "PPO" alone: the PPO-trained agents
                 line, data = plot_series(ax, [p[0] for p in points], [p[1] for p in points], errorbars=not few,
                                          band_alpha=0.06 if few else 0.12, color="black",
                                          linestyle=["-", (0, (1, 1)), "-."][i % 3], marker="o", markersize=3, label=label)  # fmt: skip
@@ -293,7 +333,7 @@ def figure_for_variant(
                                          label=label)  # fmt: skip
                 drawn.append(data)
                 entries.append(((1, j, -gamma), label, line))  # the paper's legend: highest γ first
-        any_clipped |= set_y_range(ax, env, drawn, few)
+        any_clipped |= set_y_range(ax, env, drawn, few, fixed=(y_limits or {}).get(env))
         style_axis(ax, panel_title(env, env_rows), "training steps", "return", steps_on_x=True)
     if any_clipped:
         entries.append(((2, 0, 0), clipped_handle().get_label(), clipped_handle()))
@@ -303,7 +343,7 @@ def figure_for_variant(
         if variant == "ppo"
         else f"{name}: evaluated at each guidance γ"
     )
-    fig.suptitle(title or what, fontsize=10)
+    fig.suptitle(title or what, fontsize=TITLE_SIZE + 1)
     legend_right(fig, entries, "mean ± 95% CI over seeds")
     return fig
 
@@ -343,10 +383,10 @@ def gamma_response(summary, envs, step):
         any_clipped |= set_y_range(ax, env, drawn, few)
         extra, code = panel_notes([r for r in env_rows if int(r["step"]) == at], sep="\n")
         title = f"{env} at {step_label(at)} steps\n{extra}" + (f"\n{code}" if code else "")
-        style_axis(ax, title, "eval guidance γ", "return", steps_on_x=False)
+        style_axis(ax, title, "eval guidance γ (log scale)", "return", steps_on_x=False)
     if any_clipped:
         entries.append(((9, "", ""), clipped_handle().get_label(), clipped_handle()))
-    legend_right(fig, entries, "training variant")
+    legend_right(fig, entries, "trained as (each evaluated\nat the γ on the x-axis)")
     return fig
 
 
@@ -387,8 +427,40 @@ def learning_curves(curves: dict, bins: int = 50, min_points: int = 5) -> matplo
         if clipped:
             handles.append(clipped_handle())
             labels.append("CI clipped")
-        ax.legend(handles, labels, fontsize=6, frameon=False)
+        ax.legend(handles, labels, fontsize=LEGEND_SIZE - 2, frameon=False)
         if notes:
             ax.text(0.02, 0.02, "too few points for a curve:\n" + "\n".join(notes), transform=ax.transAxes, fontsize=6,
                     va="bottom", color="0.3")  # fmt: skip
     return fig
+
+
+def aggregate_intervals(aggregate: list[dict], kind: str):
+    """The aggregate IQM as rliable draws it: at the last step, one row per (variant, eval γ), the IQM
+    of normalised scores with its 95% CI as a bar, in the variant's colour; dotted lines at the two
+    fixed references (plot_results.aggregate_iqm: 0 = the paper's PPO at its first step, 1 = at its
+    last). `aggregate`: aggregate_iqm's rows."""
+    last = max(int(r["step"]) for r in aggregate)
+    rows = sorted((r for r in aggregate if int(r["step"]) == last),
+                  key=lambda r: (variant_rank(r["variant"]), r["variant"], -float(r["eval_guidance"])))  # fmt: skip
+    fig, ax = plt.subplots(figsize=(6.0, 0.75 + 0.28 * len(rows)), layout="constrained")
+    for y, r in enumerate(reversed(rows)):
+        colour = variant_colour(r["variant"].split(" [")[0])
+        low, high = float(r["ci_low"]), float(r["ci_high"])
+        if not math.isnan(low):
+            ax.barh(y, high - low, left=low, height=0.6, color=colour, alpha=0.35, linewidth=0)
+        ax.plot([float(r["iqm"])], [y], marker="|", markersize=12, color=colour, markeredgewidth=2)
+    ax.set_yticks(range(len(rows)),
+                  labels=[f"{series_label(r['variant'])}, γ = {float(r['eval_guidance']):g}" for r in reversed(rows)])  # fmt: skip
+    for x in (0.0, 1.0):
+        ax.axvline(x, color="0.5", linestyle=":", linewidth=1)
+    envs = int(rows[0]["n_envs"]) if rows else 0
+    style_axis(ax, f"{kind.capitalize()}: IQM over {envs} tasks × seeds at {step_label(last)} steps (95% CI)",
+               "normalised score: 0 = the paper's PPO at its first step, 1 = at its last", "", steps_on_x=False)  # fmt: skip
+    ax.grid(axis="y", visible=False)
+    return fig
+
+
+def series_label(series: str) -> str:
+    """The paper's name of an aggregate row's variant (`variant [series]`)."""
+    variant, _, rest = series.partition(" [")
+    return paper_name(variant) + (f" [{rest}" if rest else "")

@@ -1,4 +1,5 @@
 import csv
+import itertools
 import math
 import re
 import subprocess
@@ -12,6 +13,7 @@ from scipy import stats
 
 import plot_results as plots
 from pgg_utils import figures
+from pgg_utils.figures import PAPER_DROPOUT_FIGURE_YLIM
 from pgg_utils.files import read_csv
 from pgg_utils.stats import (
     bootstrap_coverage,
@@ -198,7 +200,14 @@ def test_detectable_gap_scales_with_the_spread_and_is_undefined_without_one():
 def test_median_relative_gap_resamples_seeds_per_run_set_with_the_references_fixed():
     x = np.array([90.0, 95.0, 100.0, 105.0, 130.0])
     two_cells = [(np.stack([x, x + 10]), np.array([100.0, 110.0]))]  # one run set: its two cells share the seed draws
-    median, low, high = median_relative_gap(two_cells, resamples=2000, seed=0)
+    # 5 seeds: the bootstrap enumerated, its percentiles those of all 3,125 equally likely draws
+    every = np.array(list(itertools.product(range(5), repeat=5)))
+    gaps = np.sort(np.median([(x[every].mean(1) - 100) / 100, (x[every].mean(1) + 10 - 110) / 110], axis=0))
+    assert median_relative_gap(two_cells)[1:] == pytest.approx(
+        (gaps[78 - 1], gaps[3047 - 1])
+    )  # ⌈0.025·3125⌉, ⌈0.975·3125⌉
+    # too many to enumerate: Monte Carlo draws
+    median, low, high = median_relative_gap(two_cells, resamples=2000, seed=0, exact_limit=0)
     draws = np.random.default_rng(0).integers(0, 5, size=(2000, 5))
     first, second = (x[draws].mean(1) - 100) / 100, (x[draws].mean(1) + 10 - 110) / 110
     expected_low, expected_high = np.percentile(np.median(np.stack([first, second]), axis=0), [2.5, 97.5])
@@ -464,12 +473,12 @@ def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
     fig = figures.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "pgg_g1.1")
     for ax in fig.axes:
         lines = [line for line in ax.get_lines() if not line.get_label().startswith("_")]  # not error-bar caps
-        assert [line.get_label() for line in lines] == ["PPO", "γ = 1", "γ = 2"]
+        assert [line.get_label() for line in lines] == ["PPO (γ = 1)", "γ = 1", "γ = 2"]
         ppo, gamma1, gamma2 = lines
         assert ppo.get_color() == "black" and ppo.get_linestyle() == "-" and gamma2.get_linestyle() == "--"
         assert gamma1.get_marker() != gamma2.get_marker()  # stacked lines stay apart
         assert len(ax.collections) >= 3  # one CI band (and error bars) per line
-    assert legend_labels(fig) == ["PPO", "γ = 2", "γ = 1"]  # the paper's order: PPO, then the highest γ first
+    assert legend_labels(fig) == ["PPO (γ = 1)", "γ = 2", "γ = 1"]  # the paper's order: PPO, then the highest γ first
     assert fig._suptitle.get_text().startswith("PGG, γ_train = 1.1")
     assert "pgg_g1.1" not in fig._suptitle.get_text() and "checkpoints, eval guidance" not in fig._suptitle.get_text()
     cartpole = next(line for line in fig.axes[1].get_lines() if line.get_label() == "γ = 2")
@@ -540,6 +549,14 @@ def test_one_gamma_and_one_variant_have_one_colour_in_every_figure(tmp_path):
         assert line_style(ppo_fig, f"γ = {gamma:g}") == line_style(pgg_fig, f"γ = {gamma:g}") == expected
     assert len({line_style(pgg_fig, f"γ = {g}")[0] for g in (1, 2, 5)}) == 3
     assert figures.gamma_colour(1.05, "continuous") != figures.gamma_colour(1.0, "continuous")
+    # the paper's colours in its continuous figure (its legend, read in data/read_dropout_figure.py) ...
+    paper = {1.0: (71, 42, 122), 1.1: (33, 145, 140), 1.2: (176, 221, 47)}
+    for gamma, rgb in paper.items():
+        ours = np.array(matplotlib.colors.to_rgb(figures.gamma_colour(gamma, "continuous"))) * 255
+        assert np.abs(ours - rgb).sum() < 12
+    # ... and the table's γ past it in colours of their own
+    beyond = {figures.gamma_colour(g, "continuous") for g in (1.25, 1.3, 1.5)}
+    assert len(beyond) == 3 and not beyond & {figures.gamma_colour(g, "continuous") for g in paper}
     beside_ppo = figures.gamma_response(summary, ["CartPole-v1"], step=None)
     alone = figures.gamma_response(summary_of(tmp_path / "guided.csv"), ["CartPole-v1"], step=None)
     name = "PGG, γ_train = 1.1"
@@ -560,14 +577,17 @@ def test_the_continuous_dropout_figure_draws_the_papers_gammas_and_the_rest_apar
     monkeypatch.setattr(plots, "save_figure", lambda fig, stem, written: figures.setdefault(stem.name, fig))
     plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
     labels = lambda fig: [line.get_label() for line in fig.axes[1].get_lines() if not line.get_label().startswith("_")]
-    assert labels(figures["fig_continuous_pgg_drop0.1"]) == ["PPO", "γ = 1", "γ = 1.2"]  # the paper's 1.0-1.2
+    assert labels(figures["fig_continuous_pgg_drop0.1"]) == ["PPO (γ = 1)", "γ = 1", "γ = 1.2"]  # the paper's 1.0-1.2
     beyond = figures["fig_continuous_pgg_drop0.1_beyond_paper"]
     assert (
-        labels(beyond) == ["PPO", "γ = 1", "γ = 1.5"]
+        labels(beyond) == ["PPO (γ = 1)", "γ = 1", "γ = 1.5"]
         and "beyond the paper's figure (1.5)" in beyond._suptitle.get_text()
     )
     assert line_style(beyond, "γ = 1", ax=1) == line_style(figures["fig_continuous_pgg_drop0.1"], "γ = 1", ax=1)
     assert "fig_continuous_ppo_beyond_paper" not in figures  # only where the paper's figure draws fewer γ
+    # beside the paper's figure: its y-limits (Hopper 908-3162), widened to hold our means (here ~1000)
+    assert figures["fig_continuous_pgg_drop0.1"].axes[1].get_ylim() == PAPER_DROPOUT_FIGURE_YLIM["Hopper-v4"]
+    assert figures["fig_continuous_ppo"].axes[1].get_ylim()[1] < 1500  # the others fit their data
     matplotlib.pyplot.close("all")
 
 
@@ -638,7 +658,14 @@ def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
     row = next(
         r for r in aggregate if r["variant"] == "pgg_g1.1" and r["step"] == "200000" and r["eval_guidance"] == "2.0"
     )
-    assert float(row["iqm"]) == pytest.approx(1.0, abs=0.02)  # best cell in both envs at 200k
+    # normalised by the paper's PPO at its first and last step (CartPole 270.6 and 487.8, Acrobot −111.3 and
+    # −83.6), fixed references: the sweep's other cells do not move it
+    cells = {(r["env_id"], int(r["step"]), float(r["eval_guidance"])): r for r in summary_of(sweep_dir)
+             if r["variant"] == "pgg_g1.1"}  # fmt: skip
+    scores = []
+    for env, (first, last) in {"CartPole-v1": (270.6, 487.8), "Acrobot-v1": (-111.3, -83.6)}.items():
+        scores += [(float(x) - first) / (last - first) for x in cells[(env, 200000, 2.0)]["seed_means"].split(";")]
+    assert float(row["iqm"]) == pytest.approx(stats.trim_mean(scores, 0.25), abs=1e-4)
     assert float(row["ci_low"]) <= float(row["iqm"]) <= float(row["ci_high"])
 
 

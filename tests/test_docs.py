@@ -1,0 +1,64 @@
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "results" / "README.md",
+         ROOT / "benchmarks" / "README.md"]  # fmt: skip
+LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
+
+
+def anchors(page: Path) -> set[str]:
+    """GitHub's heading anchors: lower case, punctuation but hyphens dropped, spaces to hyphens."""
+    found = set()
+    for line in page.read_text().splitlines():
+        if line.startswith("#") and not line.startswith("#!"):
+            text = line.lstrip("#").strip().lower()
+            found.add(re.sub(r"[^\w\- ]", "", text).replace(" ", "-"))
+    return found
+
+
+def relative_links(page: Path) -> list[str]:
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.DOTALL)  # code blocks hold no links
+    return [t for t in LINK.findall(text) if not re.match(r"[a-z]+:", t)]
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_relative_link_resolves(page):
+    broken = []
+    for target in relative_links(page):
+        path, _, anchor = target.partition("#")
+        resolved = (page.parent / path).resolve() if path else page
+        if not resolved.exists():
+            broken.append(f"{target}: no such file")
+        elif anchor and resolved.suffix == ".md" and anchor not in anchors(resolved):
+            broken.append(f"{target}: no heading with that anchor")
+    assert not broken, f"{page.relative_to(ROOT)}: " + "; ".join(broken)
+
+
+def test_the_link_check_sees_a_broken_link_and_a_missing_anchor(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text("# A heading, with `code`\n[ok](#a-heading-with-code) [gone](nothing.md) [bad](#nowhere)\n")
+    assert relative_links(page) == ["#a-heading-with-code", "nothing.md", "#nowhere"]
+    assert anchors(page) == {"a-heading-with-code"}
+
+
+def test_readme_shows_the_glance_table_as_the_script_prints_it():
+    printed = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "results_at_a_glance.py")], capture_output=True,
+                             text=True, check=True, timeout=120).stdout  # fmt: skip
+    readme = (ROOT / "README.md").read_text()
+    shown = readme.split("<!-- glance: python benchmarks/results_at_a_glance.py -->\n")[1].split("<!-- /glance -->")[0]
+    assert shown == printed
+    assert printed.count("\n") == 2 + 8  # a row per task of the paper's two tables
+
+
+def test_readme_stays_a_front_page_with_the_ci_commands():
+    readme = (ROOT / "README.md").read_text()
+    assert len(readme.splitlines()) <= 220
+    ci = (ROOT / ".ci" / "run").read_text()
+    for command in ('pip install torch==2.13.0 && pip install -e ".[dev]" && python reproduce.py --preset quick',
+                    "python -m pytest"):  # fmt: skip
+        assert command in readme and command in ci
