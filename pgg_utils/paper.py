@@ -26,7 +26,7 @@ BEYOND_VARIANTS = {
     "pgg_g1to1.2": ("--guidance", "1", "--guidance-schedule", "linear", "--guidance-final", "1.2"),
     # held at the KL that the constant 1.1 reaches over its first 300k Hopper steps (a pilot, README of
     # results/beyond), within γ_train 1 to 1.3
-    "pgg_adaptive1.1_kl0.02": ("--guidance", "1.1", "--guidance-schedule", "adaptive", "--guidance-kl-target", "0.02",
+    "pgg_adaptive1.1_kl0.04": ("--guidance", "1.1", "--guidance-schedule", "adaptive", "--guidance-kl-target", "0.04",
                                "--guidance-bounds", "1", "1.3"),
     "pgg_g1.1_goal": ("--guidance", "1.1", "--null-dims", "{goal}"),
 }  # fmt: skip
@@ -77,7 +77,7 @@ REFERENCE_ARGS = {
 def paper_name(variant: str) -> str:
     """The paper's name of a variant (ppo -> PPO, pgg_g1.1 -> PGG, γ_train = 1.1, pgg_drop0.1 -> PGG,
     dropout 0.1), and a name in its words for the others (pgg_g1to1.2 -> PGG, γ_train 1 → 1.2;
-    pgg_adaptive1.1_kl0.02 -> PGG, adaptive γ_train from 1.1, KL target 0.02; ..._goal -> ..., goal null)."""
+    pgg_adaptive1.1_kl0.04 -> PGG, adaptive γ_train from 1.1, KL target 0.04; ..._goal -> ..., goal null)."""
     if variant == "ppo":
         return "PPO"
     if not variant.startswith("pgg_"):
