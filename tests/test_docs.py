@@ -62,3 +62,12 @@ def test_readme_stays_a_front_page_with_the_ci_commands():
     for command in ('pip install torch==2.13.0 && pip install -e ".[dev]" && python reproduce.py --preset quick',
                     "python -m pytest"):  # fmt: skip
         assert command in readme and command in ci
+
+
+def test_the_readmes_trained_agent_snippet_runs(capsys, monkeypatch):
+    """The front page's "Use a trained agent" code, run as written on the shipped agent it names."""
+    monkeypatch.chdir(ROOT)
+    section = (ROOT / "README.md").read_text().split("## Use a trained agent", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.DOTALL).group(1)
+    exec(compile(code, "README.md", "exec"), {})
+    assert float(capsys.readouterr().out.strip()) > 1000  # a trained Hopper at γ = 1.2 hops
