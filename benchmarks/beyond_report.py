@@ -1,0 +1,293 @@
+"""The report of "Beyond the paper": each variant of the paper's future work (scheduled and adaptive
+γ_train, guidance on a goal) against its baselines, from committed episode CSVs only.
+
+    python benchmarks/beyond_report.py results/beyond --table results/continuous/episodes.csv
+
+Reads every `results/beyond/<task>/episodes.csv` (the new variants, and for tasks outside the paper's
+table their own PPO and γ_train 1.1 runs), the continuous table's episodes for the baselines of the
+paper's tasks, `results/beyond/<task>/heldout_gamma.csv` where the held-out selection was run, and
+`results/beyond/goal_distance.csv` (benchmarks/goal_distance.py) where it exists. Writes into the
+folder, atomically:
+  report.md    per task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, collapsed
+               runs), each new variant against each baseline (Welch + Holm over the whole report, the gap
+               each test can detect at 80% power, a sign test over the cells of both sweeps, the pooled
+               median gap over every (step, γ) cell with its exact bootstrap interval), the held-out γ,
+               the γ-response at the last step, and the final distance to the goal against γ
+  report.csv   one row per (task, variant, baseline, step) at γ = 1: the tests' numbers
+  gamma_response.png   return against eval γ at the last step, a panel per task
+A run "collapses" where its γ = 1 return at the last step is below half of its best mark's.
+"""
+
+import csv
+import math
+import sys
+from collections import defaultdict
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tyro
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from pgg_utils.agreement import fmt, fmt_p, step_label
+from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic
+from pgg_utils.paper import BEYOND_VARIANTS, paper_name, variant_rank
+from pgg_utils.stats import ALPHA, detectable_gap, holm, mean_ci95, median_relative_gap, sign_test, welch
+
+BASELINES = ("ppo", "pgg_g1.1")
+COLLAPSE_FRACTION = 0.5
+REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
+                  "p", "p_holm", "detectable_gap", "n_seeds", "baseline_n_seeds"]  # fmt: skip
+
+
+@dataclass
+class Args:
+    folder: tyro.conf.Positional[str]
+    """results/beyond: one folder per task, each with the episodes.csv of its sweep"""
+    table: str = "results/continuous/episodes.csv"
+    """the continuous table's episodes, for the baselines of the paper's tasks"""
+
+
+def read_rows(path: Path) -> list[dict]:
+    with open(path, newline="") as f:
+        return [r for r in csv.DictReader(f) if r["policy"] == "sample" and r["null_branch"] == "learned"]
+
+
+def seed_means(rows: list[dict]) -> dict:
+    """{(env, variant, step, γ): {seed: mean return}}."""
+    returns = defaultdict(lambda: defaultdict(list))
+    for r in rows:
+        returns[(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))][int(r["seed"])].append(
+            float(r["return"])
+        )
+    return {key: {seed: float(np.mean(v)) for seed, v in by_seed.items()} for key, by_seed in returns.items()}
+
+
+def cells_of(means: dict, env: str, variant: str) -> dict:
+    return {(step, gamma): seeds for (e, v, step, gamma), seeds in means.items() if e == env and v == variant}
+
+
+def summary(seeds: dict) -> tuple[float, float, float]:
+    values = list(seeds.values())
+    mean, half, _, _ = mean_ci95(values)
+    return mean, half, float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
+
+
+def collapsed(cells: dict) -> list[int]:
+    """Seeds whose γ = 1 return at the last step is below COLLAPSE_FRACTION of their best mark's."""
+    at_one = {step: seeds for (step, gamma), seeds in cells.items() if gamma == 1.0}
+    if not at_one:
+        return []
+    last = max(at_one)
+    out = []
+    for seed, final in at_one[last].items():
+        best = max(at_one[step].get(seed, -math.inf) for step in at_one)
+        if best > 0 and final < COLLAPSE_FRACTION * best:
+            out.append(seed)
+    return sorted(out)
+
+
+def comparisons(means: dict, env: str, variant: str, baseline: str) -> tuple[list[dict], dict]:
+    """Rows at γ = 1 per step, and the pooled tests over every common (step, γ) cell."""
+    ours, theirs = cells_of(means, env, variant), cells_of(means, env, baseline)
+    rows = []
+    for step, gamma in sorted(ours):
+        if gamma != 1.0 or (step, gamma) not in theirs:
+            continue
+        (m1, _, s1), (m2, _, s2) = summary(ours[(step, gamma)]), summary(theirs[(step, gamma)])
+        n1, n2 = len(ours[(step, gamma)]), len(theirs[(step, gamma)])
+        t, _, p = welch(m1, s1, n1, m2, s2, n2)
+        rows.append({"env_id": env, "variant": variant, "baseline": baseline, "step": step, "mean": m1, "sd": s1,
+                     "baseline_mean": m2, "baseline_sd": s2, "gap": m1 - m2, "t": t, "p": p,
+                     "detectable_gap": detectable_gap(s1, n1, s2, n2, ALPHA), "n_seeds": n1,
+                     "baseline_n_seeds": n2})  # fmt: skip
+    common = sorted(set(ours) & set(theirs))
+    pooled = {}
+    if common:
+        differences = [summary(ours[c])[0] - summary(theirs[c])[0] for c in common]
+        pooled["sign"] = sign_test(differences)
+        seeds = sorted(set.intersection(*(set(ours[c]) for c in common)))
+        if len(seeds) >= 2:
+            block = np.array([[ours[c][s] for s in seeds] for c in common])
+            references = np.array([summary(theirs[c])[0] for c in common])
+            if np.all(references != 0):
+                pooled["median_gap"] = median_relative_gap([(block, references)])
+        pooled["cells"] = len(common)
+    return rows, pooled
+
+
+def read_heldout(folder: Path) -> dict:
+    """{(env, variant, step): heldout row} from each task's heldout_gamma.csv."""
+    out = {}
+    for path in sorted(folder.glob("*/heldout_gamma.csv")):
+        with open(path, newline="") as f:
+            for r in csv.DictReader(f):
+                out[(r["env_id"], r["variant"], int(r["step"]))] = r
+    return out
+
+
+def read_goal_distance(folder: Path) -> dict:
+    """{(env, variant, γ): [final distance per seed]} from goal_distance.csv."""
+    path = folder / "goal_distance.csv"
+    if not path.exists():
+        return {}
+    per_seed = defaultdict(lambda: defaultdict(list))
+    with open(path, newline="") as f:
+        for r in csv.DictReader(f):
+            per_seed[(r["env_id"], r["variant"], float(r["eval_guidance"]))][int(r["seed"])].append(
+                float(r["final_distance"])
+            )
+    return {key: [float(np.mean(v)) for _, v in sorted(s.items())] for key, s in per_seed.items()}
+
+
+def pct(x: float) -> str:
+    return "–" if math.isnan(x) else f"{100 * x:+.1f}%"
+
+
+def task_section(env: str, means: dict, variants: list[str], rows: list[dict], pooled: dict, heldout: dict,
+                 distance: dict) -> list[str]:  # fmt: skip
+    lines = [f"## {env}", ""]
+    steps = sorted({s for (e, v, s, g) in means if e == env})
+    lines += [("Return at γ = 1, mean ± 95% CI over seeds (seed sd); runs that collapse (γ = 1 return at the last "
+              "step below half their best mark's) named by seed."), "",
+              "| variant | " + " | ".join(step_label(s) for s in steps) + " | collapsed |",
+              "|---|" + "---|" * (len(steps) + 1)]  # fmt: skip
+    for variant in variants:
+        cells = cells_of(means, env, variant)
+        out = []
+        for step in steps:
+            if (step, 1.0) in cells:
+                m, h, s = summary(cells[(step, 1.0)])
+                out.append(f"{m:.1f} ± {h:.1f} ({s:.0f})")
+            else:
+                out.append("–")
+        gone = collapsed(cells)
+        lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + f" | {', '.join(map(str, gone)) or 'none'} |")
+    lines += ["", ("Each new variant against each baseline at γ = 1 (Welch's t test, Holm over every test of this "
+              "report; the gap the test detects with 80% power at α = 0.05 beside it), then over every (step, eval γ) "
+              "cell both sweeps hold: a sign test (the cells of one run share its seeds, so it overstates their "
+              "independence), and the median relative gap (ours − baseline) / |baseline| with its exact bootstrap "
+              "interval over our seeds, which resamples whole runs."), "",
+              ("| variant | baseline | step | gap | p (Holm) | detectable gap | cells above / below (sign p) | "
+              "median gap [95% CI] |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in rows:
+        if r["env_id"] != env:
+            continue
+        key = (env, r["variant"], r["baseline"])
+        last = r["step"] == max(x["step"] for x in rows if (x["env_id"], x["variant"], x["baseline"]) == key)
+        tail = "| |"
+        if last and key in pooled:
+            above, below, _, p = pooled[key]["sign"]
+            gap = pooled[key].get("median_gap")
+            tail = (f"| {above} / {below} ({fmt_p(p)}) | "
+                    + (f"{pct(gap[0])} [{pct(gap[1])}, {pct(gap[2])}] |" if gap else "– |"))  # fmt: skip
+        lines.append(f"| {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {step_label(r['step'])} | "
+                     f"{fmt(r['gap'])} | {fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) | {fmt(r['detectable_gap'])} {tail}")  # fmt: skip
+    held = [(v, heldout.get((env, v, steps[-1]))) for v in variants]
+    if any(h for _, h in held):
+        lines += ["", (f"Held-out γ at {step_label(steps[-1])}: chosen on the sweep above, scored on a fresh sweep "
+                  "(episode seeds 20000+) against γ = 1 on the same fresh episodes."), "",
+                  "| variant | chosen γ | fresh return | fresh at γ = 1 | gain ± 95% CI | p (Holm) |",
+                  "|---|---|---|---|---|---|"]  # fmt: skip
+        for variant, h in held:
+            if h and h["status"] == "tested":
+                lines.append(f"| {paper_name(variant)} | {float(h['selected_gamma']):g} | {fmt(float(h['fresh_mean']))} | "
+                             f"{fmt(float(h['fresh_baseline']))} | {fmt(float(h['fresh_gain']))} ± "
+                             f"{fmt(float(h['fresh_gain_ci95']))} | {fmt_p(float(h['p']))} ({fmt_p(float(h['p_holm']))}) |")  # fmt: skip
+            elif h:
+                lines.append(f"| {paper_name(variant)} | {float(h['selected_gamma']):g} | – | – | γ = 1 chosen | – |")
+    gammas = sorted({g for (e, v, s, g) in means if e == env and s == steps[-1]})
+    lines += ["", f"γ-response at {step_label(steps[-1])}: mean return over seeds at each eval γ.", "",
+              "| variant | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |", "|---|" + "---|" * len(gammas)]  # fmt: skip
+    for variant in variants:
+        cells = cells_of(means, env, variant)
+        out = [f"{summary(cells[(steps[-1], g)])[0]:.1f}" if (steps[-1], g) in cells else "–" for g in gammas]
+        lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + " |")
+    goal_gammas = sorted({g for (e, v, g) in distance if e == env})
+    if goal_gammas:
+        lines += ["", (f"Final distance to the goal at {step_label(steps[-1])} (the last step's `reward_dist`, negated; "
+                  "lower is closer), mean ± 95% CI over seeds of the per-seed mean over episodes."), "",
+                  "| variant | " + " | ".join(f"γ = {g:g}" for g in goal_gammas) + " |",
+                  "|---|" + "---|" * len(goal_gammas)]  # fmt: skip
+        for variant in variants:
+            out = []
+            for g in goal_gammas:
+                values = distance.get((env, variant, g))
+                out.append(f"{mean_ci95(values)[0]:.4f} ± {mean_ci95(values)[1]:.4f}" if values else "–")
+            lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + " |")
+    return [*lines, ""]
+
+
+def gamma_response_figure(means: dict, envs: list[str], variants_of: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pgg_utils.figures import variant_colour
+
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.4), squeeze=False)
+    for ax, env in zip(axes[0], envs):
+        last = max(s for (e, v, s, g) in means if e == env)
+        for variant in variants_of[env]:
+            cells = cells_of(means, env, variant)
+            gammas = sorted(g for (s, g) in cells if s == last)
+            stats = [mean_ci95(list(cells[(last, g)].values())) for g in gammas]
+            m, h = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
+            color = variant_colour(variant)
+            ax.plot(gammas, m, marker="o", ms=3, color=color, label=paper_name(variant))
+            ax.fill_between(gammas, m - h, m + h, color=color, alpha=0.15)
+        ax.set_title(f"{env}, {step_label(last)}")
+        ax.set_xlabel("eval guidance γ")
+        ax.set_ylabel("return")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def report(args: Args) -> list[Path]:
+    folder = Path(args.folder)
+    task_files = sorted(folder.glob("*/episodes.csv"))
+    if not task_files:
+        raise InputError(f"no <task>/episodes.csv under {folder}")
+    beyond = [r for path in task_files for r in read_rows(path)]
+    envs = sorted({r["env_id"] for r in beyond})
+    own = {(r["env_id"], r["variant"]) for r in beyond}
+    table_path = Path(args.table)
+    table = [r for r in read_rows(table_path) if r["env_id"] in envs and r["variant"] in BASELINES
+             and (r["env_id"], r["variant"]) not in own] if table_path.exists() else []  # fmt: skip
+    means = seed_means(beyond + table)
+    variants_of = {env: sorted({v for (e, v, s, g) in means if e == env}, key=lambda v: (variant_rank(v), v))
+                   for env in envs}  # fmt: skip
+    rows, pooled = [], {}
+    for env in envs:
+        for variant in (v for v in variants_of[env] if v in BEYOND_VARIANTS):
+            for baseline in (b for b in BASELINES if b in variants_of[env]):
+                found, pooled[(env, variant, baseline)] = comparisons(means, env, variant, baseline)
+                rows.extend(found)
+    for r, p in zip(rows, holm([r["p"] for r in rows])):
+        r["p_holm"] = p
+    heldout, distance = read_heldout(folder), read_goal_distance(folder)
+    lines = ["# Beyond the paper: the report", "",
+             (f"Generated by `python benchmarks/beyond_report.py {args.folder} --table {args.table}` from the committed "
+             "episode CSVs. Baselines of the paper's tasks come from the continuous table's runs (the same code "
+             "class: eager training, the same commit's algorithm, MuJoCo 2.3.7); Reacher-v4's are trained here."), ""]  # fmt: skip
+    for env in envs:
+        lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance)
+    written = [folder / "report.md", folder / "report.csv", folder / "gamma_response.png"]
+    write_atomic(written[0], "\n".join(lines))
+    write_csv_atomic(written[1], REPORT_COLUMNS, rows)
+    gamma_response_figure(means, envs, variants_of, written[2])
+    return written
+
+
+def main() -> None:
+    args = tyro.cli(Args, description=__doc__)
+    with one_line_errors():
+        for path in report(args):
+            print(path)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,88 @@
+"""How close guidance brings the fingertip (Reacher-v4) or the object (Pusher-v4) to its goal: the final
+distance of every episode against the eval γ, for "Beyond the paper" (benchmarks/beyond_report.py).
+
+    python benchmarks/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
+        results/continuous/agents --envs Reacher-v4 Pusher-v4 --steps 1000000 --output results/beyond/goal_distance.csv
+
+Each (checkpoint, γ) plays the episodes of a sweep cell (reset seed eval_seed + k, the sweep's action
+noise for episode k) one at a time through the agent's `act`, and records the distance the task reports
+at its last step (`-info["reward_dist"]`: fingertip to target, object to goal). One row per episode.
+"""
+
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import tyro
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import eval_gamma_sweep as sweep
+from pgg_utils import runs
+from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
+from pgg_utils.identity import run_identity
+from pgg_utils.paper import GOAL_DIMS, PAPER_GAMMAS
+
+COLUMNS = ["env_id", "variant", "run", "seed", "step", "eval_guidance", "episode", "return", "final_distance"]
+
+
+@dataclass
+class Args:
+    paths: tyro.conf.Positional[tuple[str, ...]]
+    """agents folders, run directories or checkpoint files"""
+    output: str
+    """the CSV to write"""
+    envs: tuple[str, ...] = tuple(GOAL_DIMS)
+    """only checkpoints of these tasks (each must report reward_dist)"""
+    steps: tuple[int, ...] | None = None
+    """only these step marks; None: all"""
+    gammas: tuple[float, ...] = PAPER_GAMMAS["continuous"]
+    """eval guidance values"""
+    episodes: int = 50
+    """episodes per (checkpoint, γ)"""
+    eval_seed: int = 10_000
+    """episode k resets with seed eval_seed + k, as in the sweep"""
+
+
+def final_distances(policy, ckpt: dict, gamma: float, episodes: int, eval_seed: int) -> list[tuple[float, float]]:
+    """(return, final distance) of each episode of one cell."""
+    env = sweep.make_eval_env(ckpt)
+    horizon, action_size = sweep.horizon_and_action_size(env, ckpt)
+    out = []
+    for k in range(episodes):
+        noise = sweep.episode_noise("continuous", eval_seed, k, horizon, action_size)
+        obs, _ = env.reset(seed=eval_seed + k)
+        total, t, done, info = 0.0, 0, False, {}
+        while not done:
+            action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], False)[0]
+            obs, reward, terminated, truncated, info = env.step(action)
+            total, t, done = total + float(reward), t + 1, terminated or truncated
+        out.append((total, -float(info["reward_dist"])))
+    env.close()
+    return out
+
+
+def main() -> None:
+    args = tyro.cli(Args, description=__doc__)
+    with one_line_errors():
+        rows = []
+        for path in runs.find_checkpoints(args.paths, args.steps):
+            agent, ckpt = sweep.load_any_checkpoint(path)
+            if ckpt["env_id"] not in args.envs:
+                continue
+            identity, policy = run_identity(ckpt["args"], ckpt["action_space"]), sweep.GuidedPolicy(agent, ckpt)
+            for gamma in args.gammas:
+                for k, (total, distance) in enumerate(final_distances(policy, ckpt, gamma, args.episodes,
+                                                                      args.eval_seed)):  # fmt: skip
+                    rows.append({"env_id": ckpt["env_id"], "variant": identity.variant, "run": path.parent.parent.name,
+                                 "seed": ckpt["args"]["seed"], "step": ckpt["step_mark"], "eval_guidance": gamma,
+                                 "episode": k, "return": total, "final_distance": distance})  # fmt: skip
+            print(f"{path}: {len(args.gammas)} γ values", file=sys.stderr)
+        if not rows:
+            raise InputError(f"no checkpoint of {', '.join(args.envs)} under {', '.join(args.paths)}")
+        write_csv_atomic(Path(args.output), COLUMNS, rows)
+        print(f"wrote {args.output} ({len(rows)} episodes)")
+
+
+if __name__ == "__main__":
+    main()
