@@ -21,7 +21,7 @@ class RunArgs:
     torch_threads: int = 1
     """torch intra-op threads; one thread is fastest for these small networks"""
     compile: bool = False
-    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): updates ~1.6x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm, rounded differently (README, Performance)"""
+    """compile the minibatch loss and its backward with torch.compile (needs a C++ compiler): training ~1.25x faster after a one-off compile of ~20 s (~3 s from inductor's cache); the same algorithm, rounded differently (benchmarks/README.md, --compile)"""
     track: bool = False
     """if toggled, track the run with Weights and Biases (needs `pip install wandb`)"""
     wandb_project_name: str = "pgg"
