@@ -199,7 +199,7 @@ class Agent(nn.Module):
     """Actor and critic work on normalised observations; `obs_norm(raw)` produces them. Change the
     networks here: the rollouts' numpy copy and the evaluation follow the modules (pgg_utils/fast.py)."""
 
-    def __init__(self, obs_dim: int, action_dim: int, obs_clip: float = 10.0, null_dims=None, action_bounds=None):
+    def __init__(self, obs_dim: int, action_dim: int, obs_clip: float = 10.0, null_dims=None, action_bounds=None):  # PGG
         super().__init__()
         self.critic = nn.Sequential(
             layer_init(nn.Linear(obs_dim, 64)),
@@ -277,7 +277,7 @@ class Agent(nn.Module):
         return coef_null * mean_null + coef_cond * mean_cond  # PGG
 
     @torch.no_grad()
-    def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:
+    def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:  # PGG
         """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for raw
         observations (one, or a batch): normalised inside, sampled with standard normal `noise` shaped
         like the actions (drawn from torch's generator if None) or the mean if `deterministic`, and
@@ -449,8 +449,9 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
-    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats); the stats are detached
-    tensors, not floats, so that the compiled version (--compile) runs without a break back to Python."""
+    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats);
+    the stats are detached tensors, not floats, so that the compiled version (--compile) runs without a
+    break back to Python."""
     mb_obs = batch["obs"][mb_inds]
     mean = agent.guided_mean(mb_obs, guidance, drop_mask)  # PGG
     newlogprob = gaussian_log_prob(batch["actions"][mb_inds], mean, agent.actor_logstd)
@@ -650,7 +651,7 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)
+                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
         envs.close()

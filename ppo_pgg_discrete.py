@@ -168,7 +168,7 @@ class Agent(nn.Module):
         return coef_null * logits_null + coef_cond * logits_cond  # PGG
 
     @torch.no_grad()
-    def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:
+    def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:  # PGG
         """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for observations
         (one, or a batch): sampled by the Gumbel-max trick with standard Gumbel `noise` shaped like the
         logits (drawn from torch's generator if None), or the argmax if `deterministic`. `logits_null`:
@@ -315,8 +315,9 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
-    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats); the stats are detached
-    tensors, not floats, so that the compiled version (--compile) runs without a break back to Python."""
+    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats);
+    the stats are detached tensors, not floats, so that the compiled version (--compile) runs without a
+    break back to Python."""
     mb_obs = batch["obs"][mb_inds]
     logp_all = agent.guided_logits(mb_obs, guidance, drop_mask).log_softmax(-1)  # PGG
     newlogprob = logp_all.gather(-1, batch["actions"][mb_inds].unsqueeze(-1)).squeeze(-1)
@@ -511,7 +512,7 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)
+                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
         envs.close()
