@@ -199,7 +199,7 @@ class Agent(nn.Module):
     """Actor and critic work on normalised observations; `obs_norm(raw)` produces them. Change the
     networks here: the rollouts' numpy copy and the evaluation follow the modules (pgg_utils/fast.py)."""
 
-    def __init__(self, obs_dim: int, action_dim: int, obs_clip: float = 10.0, null_dims=None, action_bounds=None):  # PGG
+    def __init__(self, obs_dim: int, action_dim: int, obs_clip=10.0, null_dims=None, action_bounds=None):  # PGG
         super().__init__()
         self.critic = nn.Sequential(
             layer_init(nn.Linear(obs_dim, 64)),
