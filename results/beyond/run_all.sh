@@ -7,14 +7,26 @@
 # whose baselines are trained here too, trains with --compile (~1.25x faster).
 set -uo pipefail
 cd "$(dirname "$0")/../.."
-beyond() {  # task, variants...
+beyond() {  # task, variants...: train and sweep, then the held-out gamma on a fresh sweep, then the report
     local env=$1; shift
     python reproduce.py --preset continuous --envs "$env" --variants "$@" --root runs/beyond \
         --results "results/beyond/$env" --workers "${WORKERS:-2}" ${COMPILE:-}
-    echo "set $env done: exit $? at $(date -u +%FT%TZ)"
+    echo "set $env trained and swept: exit $? at $(date -u +%FT%TZ)"
+    python eval_gamma_sweep.py "results/beyond/$env/agents" --eval-seed 20000 --workers "${WORKERS:-2}" \
+        --output "runs/sweeps/beyond_fresh_$env" &&
+    python benchmarks/heldout_gamma.py "results/beyond/$env/episodes.csv" \
+        "runs/sweeps/beyond_fresh_$env/episodes.csv" --output "results/beyond/$env"
+    echo "set $env held-out gamma: exit $? at $(date -u +%FT%TZ)"
 }
-beyond Hopper-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04
-COMPILE=--compile beyond Reacher-v4 ppo pgg_g1.1 pgg_g1.1_goal
-beyond Walker2d-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04
-beyond Pusher-v4 pgg_g1.1_goal
-beyond Humanoid-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04
+goal_distance() {
+    python benchmarks/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \
+        results/continuous/agents --steps 1000000 --output results/beyond/goal_distance.csv
+}
+report() {
+    python benchmarks/beyond_report.py results/beyond --table results/continuous/episodes.csv
+}
+beyond Hopper-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
+COMPILE=--compile beyond Reacher-v4 ppo pgg_g1.1 pgg_g1.1_goal && goal_distance && report
+beyond Walker2d-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
+beyond Pusher-v4 pgg_g1.1_goal && goal_distance && report
+beyond Humanoid-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
