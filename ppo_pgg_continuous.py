@@ -638,9 +638,11 @@ def train(args: Args, run: runs.Run) -> None:
             next_value = policy.value(next_obs)
             advantages, returns = compute_gae(buf, next_value, next_done, args.discount, args.gae_lambda)
 
-            # Under --compile γ_train is a tensor input, so a new value compiles no new graph; eager keeps
-            # the float, whose backward rounds (1 - γ) in double, as every run before schedules did.
-            loss_guidance = (torch.tensor(guidance) if args.compile else guidance) if guided else None  # PGG
+            # A schedule under --compile feeds γ_train as a tensor, so that a new value compiles no new graph.
+            # Otherwise it stays a float: lerp's backward rounds (1 - γ) in double for a float, in float32 for
+            # a tensor, and the float is what trained the tables' runs.
+            scheduled = args.compile and args.guidance_schedule != "constant"  # PGG
+            loss_guidance = (torch.tensor(guidance) if scheduled else guidance) if guided else None  # PGG
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
             stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
             schedule.observe(stats)  # PGG: the adaptive rule's step
