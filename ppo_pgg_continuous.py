@@ -32,7 +32,12 @@ from torch import nn
 
 from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
-from pgg_utils.fast import evaluation_forward, flatten_parameters, guidance_coefficients, numpy_network
+from pgg_utils.fast import (
+    evaluation_forward,
+    flatten_parameters,
+    guidance_coefficients,  # PGG
+    numpy_network,
+)
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 
 ACTION_SPACE = "continuous"  # the checkpoints' kind; the sweep picks this script by it
@@ -264,7 +269,7 @@ class Agent(nn.Module):
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)  # PGG
         return guide(mean_cond, mean_null, 1.0 if guidance is None else guidance)  # PGG
 
-    @torch.no_grad()
+    @torch.no_grad()  # PGG
     def acting_mean(self, raw_obs: np.ndarray, guidance, mean_null=None) -> np.ndarray:  # PGG
         """The guided mean `act` samples around, float32 numpy, for a batch of raw observations."""
         obs = self.obs_norm.normalise(raw_obs)
@@ -676,7 +681,7 @@ def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agen
     shapes = {"obs_dim": ckpt["obs_dim"], "action_dim": ckpt["action_dim"]}
     if np.isfinite(ckpt.get("action_low", [-np.inf])).all() and np.isfinite(ckpt.get("action_high", [np.inf])).all():
         shapes.update(action_low=ckpt["action_low"], action_high=ckpt["action_high"])
-    else:  # saved before 2026-11-22, with ClipAction's ±inf: the environment's own bounds
+    else:  # older checkpoints hold ClipAction's ±inf there: the environment's own bounds
         probe = make_env(ckpt["env_id"])()
         shapes.update(action_low=probe.action_space.low, action_high=probe.action_space.high)
         probe.close()

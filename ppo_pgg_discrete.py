@@ -31,7 +31,12 @@ from torch import nn
 
 from pgg_utils import runs
 from pgg_utils.arguments import RunArgs
-from pgg_utils.fast import evaluation_forward, flatten_parameters, guidance_coefficients, numpy_network
+from pgg_utils.fast import (
+    evaluation_forward,
+    flatten_parameters,
+    guidance_coefficients,  # PGG
+    numpy_network,
+)
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 
 ACTION_SPACE = "discrete"  # the checkpoints' kind; the sweep picks this script by it
@@ -158,7 +163,7 @@ class Agent(nn.Module):
             logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)  # PGG
         return guide(logits_cond, logits_null, 1.0 if guidance is None else guidance)  # PGG
 
-    @torch.no_grad()
+    @torch.no_grad()  # PGG
     def acting_logits(self, obs: np.ndarray, guidance, logits_null=None) -> np.ndarray:  # PGG
         """The guided logits `act` samples from, float32 numpy, for a float32 batch `obs`."""
         logits_cond = evaluation_forward(self.actor, obs)
@@ -218,10 +223,10 @@ class RolloutPolicy:
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor), numpy_network(agent.critic)
-        self.n_actions = agent.actor[-1].out_features
         self.guidance = guidance  # PGG
-        with torch.no_grad():  # PGG
+        with torch.no_grad():
             self.logits_null = agent.unconditional_logits().numpy()  # PGG
+        self.n_actions = len(self.logits_null)
 
     def act(self, obs: np.ndarray, gumbel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs`. Actions are sampled by the

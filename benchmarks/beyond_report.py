@@ -257,6 +257,11 @@ def report(args: Args) -> list[Path]:
     table_path = Path(args.table)
     table = [r for r in read_rows(table_path) if r["env_id"] in envs and r["variant"] in BASELINES
              and (r["env_id"], r["variant"]) not in own] if table_path.exists() else []  # fmt: skip
+    configs = defaultdict(set)
+    for r in beyond + table:
+        configs[(r["env_id"], r["variant"])].add(r["config"])
+    if mixed := [f"{e} {v}: {', '.join(sorted(c))}" for (e, v), c in configs.items() if len(c) > 1]:
+        raise InputError(f"several configurations of one task and variant would pool as one: {'; '.join(mixed)}")
     means = seed_means(beyond + table)
     variants_of = {env: sorted({v for (e, v, s, g) in means if e == env}, key=lambda v: (variant_rank(v), v))
                    for env in envs}  # fmt: skip

@@ -13,7 +13,7 @@ import numpy as np
 from scipy import stats
 
 from pgg_utils.files import InputError
-from pgg_utils.paper import PAPER_SEEDS
+from pgg_utils.paper import PAPER_SEEDS, paper_rows
 from pgg_utils.stats import (
     ALPHA,
     POWER,
@@ -29,8 +29,6 @@ from pgg_utils.stats import (
 )
 
 PAPER_DATA = Path(__file__).resolve().parent.parent / "data" / "paper_results.csv"
-# Our variant -> the paper's (method, training guidance) in data/paper_results.csv.
-PAPER_METHOD_OF_VARIANT = {"ppo": ("ppo", ""), "pgg_g1.1": ("pgg", "1.1")}
 REFERENCE_MUJOCO = "2.3.7"  # the physics the v4 tasks were written for; cells from other versions are marked
 # CleanRL's published PPO benchmark (docs.cleanrl.dev, rl-algorithms/ppo: ppo.py on classic control,
 # ppo_continuous_action.py on MuJoCo v4, tag pr-424). Its protocol: per run the mean of the last 100
@@ -122,9 +120,9 @@ def compare_with_paper(summary: list[dict]) -> list[dict]:
     }
     out = []
     for r in summary:
-        if r["variant"] not in PAPER_METHOD_OF_VARIANT:
+        if (rows_of := paper_rows(r["variant"])) is None:
             continue
-        method, train_guidance = PAPER_METHOD_OF_VARIANT[r["variant"]]
+        method, train_guidance = rows_of
         p = paper_cells.get((r["env_id"], method, train_guidance, int(r["step"]), float(r["eval_guidance"])))
         if p is not None:
             ci = float(p["ci95"])

@@ -4,6 +4,8 @@ sweep and the launcher. Plain Python: no torch, no gymnasium."""
 import math
 from dataclasses import dataclass, fields
 
+from pgg_utils.guidance import SCHEDULES
+
 MAX_GUIDANCE = 1000.0
 
 
@@ -31,7 +33,7 @@ class RunArgs:
     output_dir: str = "runs"
     """directory under which the run directory is created"""
     run_name: str | None = None
-    """run directory name, one path component; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`"""
+    """run directory name, one path component; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`, with the schedule in place of `g{guidance}` (pgg_utils/identity.py)"""
     resume: bool = False
     """continue the run in the run directory from its last readable checkpoint (start it if it has none)"""
     overwrite: bool = False
@@ -56,7 +58,7 @@ def training_arguments(values: dict, defaults: dict) -> dict:
 
 
 def guidance_error(value: float, flag: str = "--guidance") -> str | None:
-    """The one rule for a guidance strength, in training and in the sweep's --gammas."""
+    """The one rule for a guidance strength: training's --guidance (ARGUMENT_RULES), the sweep's --gammas."""
     if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
         return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
     return None
@@ -83,8 +85,8 @@ ARGUMENT_RULES = {
     "max_grad_norm": (lambda v: 0 < v < math.inf, "a finite number > 0"),
     "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
     "cond_dropout": (lambda v: 0 <= v <= 1, "in [0, 1]"),
-    "guidance": (lambda v: 0 <= v <= MAX_GUIDANCE, f"a number in [0, {MAX_GUIDANCE:g}]"),
-    "guidance_schedule": (lambda v: v in ("constant", "linear", "adaptive"), "constant, linear or adaptive"),
+    "guidance": (lambda v: guidance_error(v) is None, f"a number in [0, {MAX_GUIDANCE:g}]"),
+    "guidance_schedule": (lambda v: v in SCHEDULES, ", ".join(SCHEDULES)),
     "guidance_final": (lambda v: v is None or 0 <= v <= MAX_GUIDANCE, f"a number in [0, {MAX_GUIDANCE:g}]"),
     "guidance_kl_target": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
     "guidance_bounds": (lambda v: 0 <= v[0] <= v[1] <= MAX_GUIDANCE, f"low <= high in [0, {MAX_GUIDANCE:g}]"),

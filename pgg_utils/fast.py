@@ -30,19 +30,18 @@ PROBE_ROWS = 8
 def numpy_network(module: nn.Module):
     """`module`'s forward for rollouts, as a function of a float32 numpy batch: numpy on views of its
     weights where it is an nn.Sequential of Linear layers and NUMPY_ACTIVATIONS, else the module's own
-    torch forward. Checked against the module on a probe batch when built; ValueError with one line
-    naming the network where they disagree (a layer this function treats wrongly)."""
+    torch forward. The numpy copy is checked against the module on a probe batch when built;
+    ValueError with one line naming the network where they disagree (a layer treated wrongly)."""
     steps = numpy_steps(module)
     if steps is None:
-        forward = torch_forward(module)
-    else:
+        return torch_forward(module)
 
-        def forward(x: np.ndarray) -> np.ndarray:
-            for step in steps:
-                x = step(x)
-            return x
+    def forward(x: np.ndarray) -> np.ndarray:
+        for step in steps:
+            x = step(x)
+        return x
 
-    in_features = next(m.in_features for m in module.modules() if isinstance(m, nn.Linear))
+    in_features = next(layer.in_features for layer in module if type(layer) is nn.Linear)
     probe = np.random.default_rng(0).standard_normal((PROBE_ROWS, in_features)).astype(np.float32)
     expected = torch_forward(module)(probe)
     if not np.allclose(forward(probe), expected, rtol=1e-4, atol=1e-5):
@@ -52,12 +51,13 @@ def numpy_network(module: nn.Module):
 
 
 def numpy_steps(module: nn.Module):
-    """The numpy operations of an nn.Sequential of known layers (views of its weights), or None."""
-    if not isinstance(module, nn.Sequential):
+    """The numpy operations of an nn.Sequential of known layers (views of its weights), or None. Known
+    means exactly these classes: a subclass may compute something else."""
+    if not isinstance(module, nn.Sequential) or not any(type(layer) is nn.Linear for layer in module):
         return None
     steps = []
     for layer in module:
-        if isinstance(layer, nn.Linear):
+        if type(layer) is nn.Linear:
             weight = layer.weight.detach().numpy().T
             bias = None if layer.bias is None else layer.bias.detach().numpy()
             steps.append(lambda x, w=weight, b=bias: x @ w if b is None else x @ w + b)

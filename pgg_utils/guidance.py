@@ -19,7 +19,7 @@ class GuidanceArgs:
 
     guidance: float = 1.0
     """guidance strength γ_train of rollouts and updates (1 = PPO; the paper trains with 1.1); with a schedule, its first value"""
-    guidance_schedule: Literal["constant", "linear", "adaptive"] = "constant"
+    guidance_schedule: Literal[SCHEDULES] = "constant"
     """how γ_train moves over training: constant; linear from --guidance to --guidance-final; adaptive: held near a KL target (pgg_utils/guidance.py)"""
     guidance_final: float | None = None
     """with --guidance-schedule linear: γ_train at the last iteration"""
@@ -89,11 +89,11 @@ class GuidanceSchedule:
 
 def schedule_error(args) -> str | None:
     """The rules of the guidance flags, one line, or None."""
-    if args.guidance_schedule not in SCHEDULES:
-        return f"--guidance-schedule must be one of {', '.join(SCHEDULES)}, got {args.guidance_schedule!r}"
     linear, adaptive = args.guidance_schedule == "linear", args.guidance_schedule == "adaptive"
     if linear != (args.guidance_final is not None):
         return "--guidance-final goes with --guidance-schedule linear (and linear needs it)"
+    if linear and args.guidance_final == args.guidance:
+        return "--guidance-schedule linear needs a --guidance-final other than --guidance (else: constant)"
     if adaptive != (args.guidance_kl_target is not None):
         return "--guidance-kl-target goes with --guidance-schedule adaptive (and adaptive needs it)"
     low, high = args.guidance_bounds

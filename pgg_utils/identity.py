@@ -1,13 +1,12 @@
 """A run's identity, from its training arguments alone: its variant id, the paper's name for it, the
-label of its configuration, its default run directory name, and whether it is one of the paper's
-variants (only those are compared with the paper's cells). Every reader (the training scripts'
-run directories, the sweep's rows, the plots, the benchmarks) calls `run_identity` or `config_label`,
-so a new training argument is named everywhere at once, or tests/test_extending.py says which table
-of pgg_utils.paper to extend."""
+label of its configuration, its default run directory name, and the paper's table rows it is compared
+with (pgg_utils.agreement reads them from the variant through the same pgg_utils.paper.paper_rows). A
+new training argument is named in every label at once, or tests/test_extending.py says which table of
+pgg_utils.paper to extend."""
 
 from dataclasses import dataclass
 
-from pgg_utils.paper import GOAL_DIMS, REFERENCE_ARGS, VARIANTS, is_mujoco, paper_name
+from pgg_utils.paper import GOAL_DIMS, REFERENCE_ARGS, is_mujoco, paper_name, paper_rows
 
 # Arguments the variant id names; the configuration label lists the other training arguments that
 # differ from the frozen reference.
@@ -22,7 +21,7 @@ class RunIdentity:
     label: str  # the variant and every other training argument that differs from the frozen reference
     train_guidance: float  # γ_train at the first iteration (constant throughout for the paper's variants)
     cond_dropout: float
-    in_paper: bool  # one of the paper's variants at the paper's settings: compared with its cells
+    paper_rows: tuple[str, str] | None  # (method, γ_train) of the paper's table rows it is compared with
 
 
 def guidance_part(args: dict) -> str:
@@ -38,7 +37,7 @@ def guidance_part(args: dict) -> str:
 def null_part(args: dict) -> str:
     """`` (the null embedding replaces the whole observation), `goal` (the task's goal dimensions,
     GOAL_DIMS), else `null` and the dimensions, e.g. `null4-5`."""
-    dims = args.get("null_dims")
+    dims = None if args.get("null_dims") is None else sorted(args["null_dims"])  # a mask: order means nothing
     if dims is None:
         return ""
     if tuple(dims) == GOAL_DIMS.get(args.get("env_id")):
@@ -86,7 +85,7 @@ def run_identity(args: dict, kind: str) -> RunIdentity:
         label=" ".join([variant, *words]),
         train_guidance=float(args["guidance"]),
         cond_dropout=float(args.get("cond_dropout", 0.0)),
-        in_paper=variant in VARIANTS and not words,
+        paper_rows=paper_rows(variant),
     )
 
 

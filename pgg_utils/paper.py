@@ -32,6 +32,16 @@ BEYOND_VARIANTS = {
 }  # fmt: skip
 
 
+# Our variant -> the paper's (method, training guidance) in data/paper_results.csv: the rows of the
+# paper's tables a run of that variant is compared with. Any other variant is compared with none.
+PAPER_ROWS_OF_VARIANT = {"ppo": ("ppo", ""), "pgg_g1.1": ("pgg", "1.1")}
+
+
+def paper_rows(variant: str) -> tuple[str, str] | None:
+    """(method, training guidance) of the paper's table rows a variant is compared with, or None."""
+    return PAPER_ROWS_OF_VARIANT.get(variant)
+
+
 def variant_flags(variant: str, env_id: str) -> list[str]:
     """The training flags of a variant of the paper (VARIANTS) or beyond it (BEYOND_VARIANTS) on `env_id`;
     ValueError where the variant needs goal dimensions the task has none of."""

@@ -47,7 +47,7 @@ def test_a_linear_schedule_from_one_trains_the_null_embedding_and_is_named_for_w
     ckpt = load(run_dir, 1536)
     assert ckpt["model"]["null_obs"].abs().sum() > 0  # γ_train = 1 at the start, yet the null branch trains
     run = identity.run_identity(ckpt["args"], "discrete")
-    assert run.variant == "pgg_g1to1.3" and run.name == "PGG, γ_train 1 → 1.3" and not run.in_paper
+    assert run.variant == "pgg_g1to1.3" and run.name == "PGG, γ_train 1 → 1.3" and run.paper_rows is None
     assert identity.config_label(ckpt) == "pgg_g1to1.3 num_steps=64 total_timesteps=1536"
 
 
@@ -275,4 +275,30 @@ def test_the_launchers_variants_are_named_by_their_flags(variant):
     module = ppo_pgg_continuous
     args = tyro.cli(module.Args, args=["--env-id", env_id, *flags])
     assert identity.run_identity({**dataclasses.asdict(args)}, "continuous").variant == variant
-    assert identity.run_identity(dataclasses.asdict(args), "continuous").in_paper == (variant in paper.VARIANTS)
+    compared = identity.run_identity(dataclasses.asdict(args), "continuous").paper_rows is not None
+    assert compared == (variant in ("ppo", "pgg_g1.1"))  # the paper's tables hold PPO and γ_train 1.1
+
+
+def test_a_linear_schedule_that_does_not_move_is_refused(tmp_path):
+    proc = run_script("ppo_pgg_discrete.py", "--output-dir", str(tmp_path), "--guidance-schedule", "linear",
+                      "--guidance-final", "1")  # fmt: skip
+    assert "needs a --guidance-final other than --guidance (else: constant)" in one_line_error(proc)
+
+
+def test_the_numpy_copy_steps_aside_for_a_network_it_does_not_know():
+    """A layer it does not know (or a subclass of one it knows) sends the network through its module:
+    the rollout acts as the module does, and nothing is probed that could draw random numbers."""
+
+    class ScaledLinear(nn.Linear):
+        def forward(self, x):
+            return 2 * super().forward(x)
+
+    for network in (nn.Sequential(nn.Linear(4, 8), nn.Dropout(0.5), nn.Tanh(), nn.Linear(8, 2)),
+                    nn.Sequential(ScaledLinear(4, 8), nn.Tanh(), nn.Linear(8, 2))):  # fmt: skip
+        network.eval()
+        x = np.random.default_rng(0).standard_normal((5, 4)).astype(np.float32)
+        state = torch.get_rng_state()
+        forward = fast.numpy_network(network)
+        assert torch.equal(torch.get_rng_state(), state)
+        with torch.no_grad():
+            np.testing.assert_array_equal(forward(x), network(torch.from_numpy(x)).numpy())
