@@ -4,11 +4,14 @@ two launchers on one root, a hand-edited episodes.csv, the exit-code rule and th
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from conftest import ROOT
+from test_plots import episode_rows, run_cli, write_episodes
 
 import eval_gamma_sweep as sweep
+import reproduce
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 FORMAT_2 = FIXTURES / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
@@ -56,3 +59,32 @@ def test_a_sigkilled_worker_ends_the_sweep_with_one_line_and_a_rerun_completes_i
                                    episodes=4))  # fmt: skip
     for name in ("episodes.csv", "summary.csv"):
         assert (tmp_path / "out" / name).read_text() == (clean / name).read_text()
+
+
+# --- 2. tasks the paper did not run ---------------------------------------------------------------------
+
+
+def tiny_grid(tmp_path, name: str, **overrides) -> reproduce.Args:
+    args = reproduce.Args(preset="quick", total_timesteps=1024, checkpoint_interval=512, seeds=1, variants=("ppo",),
+                          gammas=(1.0, 2.0), episodes=2, workers=1, root=str(tmp_path / "runs"),
+                          results=str(tmp_path / name))  # fmt: skip
+    return replace(args, **overrides)
+
+
+def test_reproduce_on_a_task_outside_the_paper_ends_with_its_tables_and_agents(tmp_path, capsys):
+    assert reproduce.reproduce(tiny_grid(tmp_path, "results", envs=("MountainCar-v0",))) == 0
+    results = tmp_path / "results"
+    assert "| Method | MountainCar-v0 |" in (results / "table_discrete.md").read_text()
+    assert "| MountainCar-v0__ppo__s1 | MountainCar-v0 | ppo | 1 |" in (results / "agents" / "README.md").read_text()
+    assert not (results / "compare_paper.md").exists()
+    err = capsys.readouterr().err
+    assert "none of the swept envs (MountainCar-v0) is in the paper's tables" in err and "results in" in err
+
+
+def test_compare_paper_on_tasks_outside_the_paper_is_a_note_and_exit_0(tmp_path):
+    target = tmp_path / "episodes.csv"  # not in the paper, and not a gymnasium task: its rows say how it acts
+    write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}, action_space="discrete"))
+    done = run_cli(target, "--output", tmp_path / "out", "--compare-paper")
+    assert done.returncode == 0 and not error_lines(done.stderr), done.stderr
+    assert "note: none of the swept envs (MyEnv-v0) is in the paper's tables" in done.stderr
+    assert (tmp_path / "out" / "table_discrete.md").exists() and not (tmp_path / "out" / "compare_paper.md").exists()

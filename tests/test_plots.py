@@ -674,7 +674,6 @@ def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
         ("missing", [], "no sweep CSV"),
         ("empty", [], "is empty"),
         ("columns", [], "lacks columns"),
-        ("foreign_env", ["--compare-paper"], "none of the swept envs"),
         ("unknown_env", [], "records no action_space for MyEnv-v0, and cannot make environment 'MyEnv-v0'"),
         ("two_kinds", [], "CartPole-v1 has discrete actions in"),
     ],
@@ -685,8 +684,6 @@ def test_bad_input_exits_with_one_line(tmp_path, setup, extra, message):
         target.write_text("")
     elif setup == "columns":
         target.write_text("a,b\n1,2\n")
-    elif setup == "foreign_env":  # not in the paper, and not a gymnasium task: its rows say how it acts
-        write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}, action_space="discrete"))
     elif setup == "unknown_env":
         write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}))
     elif setup == "two_kinds":
