@@ -25,7 +25,7 @@ import subprocess
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -33,6 +33,8 @@ import tyro
 
 import eval_gamma_sweep
 import plot_results
+import ppo_pgg_continuous
+import ppo_pgg_discrete
 from pgg_utils import paper, processes, runs
 from pgg_utils.arguments import guidance_error
 from pgg_utils.files import InputError, lock_holder, write_atomic
@@ -40,6 +42,7 @@ from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
 SCRIPTS = {"discrete": ROOT / "ppo_pgg_discrete.py", "continuous": ROOT / "ppo_pgg_continuous.py"}
+TRAINING_MODULES = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
 
 
 @dataclass(frozen=True)
@@ -332,6 +335,23 @@ def run_submitit(todo: list[RunSpec], tally: Tally, args: Args) -> None:
             tally.show(f"{len(pending)} in progress")
 
 
+def other_arguments(spec: RunSpec) -> str | None:
+    """`name (total_timesteps 10 -> 2048)` where the run's last checkpoint holds other training arguments
+    than this grid gives it (a run of another grid, which its training script refuses to continue, and
+    which the sweep must not take for this grid's); None otherwise, or where it has none to read."""
+    latest = runs.latest_checkpoint(spec.run_dir)
+    if latest is None:
+        return None
+    try:
+        recorded = runs.read_checkpoint_file(latest).get("args", {})
+    except ValueError:  # the sweep lists it in skipped.csv
+        return None
+    module = TRAINING_MODULES[paper.action_kind(spec.env_id)]
+    wanted = tyro.cli(module.Args, args=spec.command()[2:])  # the arguments the run's command gives it
+    differing = runs.differing_arguments(recorded, asdict(wanted), asdict(module.Args()))
+    return f"{spec.name} ({', '.join(differing)})" if differing else None
+
+
 def unfinished_note(spec: RunSpec) -> str:
     """`name (last checkpoint's step)`, and who is training it now where its run directory is locked."""
     holder = lock_holder(spec.run_dir)
@@ -355,9 +375,13 @@ def reproduce(args: Args) -> int:
             run_submitit(todo, tally, args)
         tally.progress.close()
 
-    swept = [s for s in specs if s.last_step() is not None]
+    stale = {s: note for s in specs if (note := other_arguments(s))}
+    if stale:
+        print(f"note: not swept, trained with other arguments than this grid's: {'; '.join(stale.values())} "
+              "(choose another --root, or delete them)", file=sys.stderr)  # fmt: skip
+    swept = [s for s in specs if s not in stale and s.last_step() is not None]
     if not swept:
-        raise InputError("no run has any checkpoint to sweep")
+        raise InputError("no run of this grid has any checkpoint to sweep")
     unfinished = [unfinished_note(s) for s in swept if not s.final_checkpoint.exists()]
     if unfinished:
         print(f"note: unfinished, so swept up to the last checkpoint: {'; '.join(unfinished)}", file=sys.stderr)

@@ -414,6 +414,13 @@ def default_run_name(args) -> str:
     return f"{args.env_id}__{args.exp_name}__g{args.guidance:g}__p{args.cond_dropout:g}__s{args.seed}"
 
 
+def differing_arguments(recorded: dict, wanted: dict, defaults: dict) -> list[str]:
+    """`name recorded -> wanted` for each training argument in which a run's checkpoint differs from the
+    arguments it is asked to continue with: the runs a training script refuses to continue."""
+    recorded, wanted = training_arguments(recorded, defaults), training_arguments(wanted, defaults)
+    return [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
+
+
 class Run:
     """One training run's directory, locked while this process trains there, and its checkpoints.
 
@@ -502,11 +509,7 @@ class Run:
         if bad := non_finite(ckpt["model"]):
             raise RunDirError(f"{latest} holds non-finite weights ({', '.join(bad[:3])}): the run diverged, and continuing "
                               "it would diverge again; choose another --run-name, or pass --overwrite")  # fmt: skip
-        recorded = training_arguments(ckpt.get("args", {}), self.defaults())
-        wanted = training_arguments(asdict(args), self.defaults())
-        differing = [
-            f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]
-        ]
+        differing = differing_arguments(ckpt.get("args", {}), asdict(args), self.defaults())
         if differing:
             raise RunDirError(
                 f"{self.dir} holds a run with other arguments ({', '.join(differing)}): "

@@ -88,3 +88,21 @@ def test_compare_paper_on_tasks_outside_the_paper_is_a_note_and_exit_0(tmp_path)
     assert done.returncode == 0 and not error_lines(done.stderr), done.stderr
     assert "note: none of the swept envs (MyEnv-v0) is in the paper's tables" in done.stderr
     assert (tmp_path / "out" / "table_discrete.md").exists() and not (tmp_path / "out" / "compare_paper.md").exists()
+
+
+# --- 3. runs of another grid ----------------------------------------------------------------------------
+
+
+def test_runs_trained_with_other_arguments_are_refused_and_never_swept(tmp_path, capsys):
+    assert reproduce.reproduce(tiny_grid(tmp_path, "first")) == 0  # s1, 1,024 steps
+    second = tiny_grid(tmp_path, "second", seeds=2, total_timesteps=2048, checkpoint_interval=1024)
+    assert reproduce.reproduce(second) == 1  # s1 is refused ("other arguments"), s2 trains
+    err = capsys.readouterr().err
+    assert "FAILED CartPole-v1__ppo__s1" in err
+    assert (
+        "not swept, trained with other arguments than this grid's: CartPole-v1__ppo__s1 (total_timesteps 1024 -> 2048)"
+        in err
+    )
+    swept = {line.split(",")[3] for line in (tmp_path / "second" / "episodes.csv").read_text().splitlines()[1:]}
+    assert swept == {"CartPole-v1__ppo__s2"}
+    assert "**1k Steps**" in (tmp_path / "second" / "table_discrete.md").read_text()
