@@ -37,7 +37,7 @@ import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import paper, processes, runs
 from pgg_utils.arguments import guidance_error
-from pgg_utils.files import InputError, lock_holder, write_atomic
+from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, lock_holder, write_atomic
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
@@ -365,6 +365,27 @@ def reproduce(args: Args) -> int:
     specs = grid(args)
     results = Path(args.results or f"results/{args.preset}")
     plot_results.check_writable(results)  # before hours of training, not after
+    lock = claim_root(Path(specs[0].root))
+    try:
+        return reproduce_locked(args, specs, results)
+    finally:
+        lock.close()
+
+
+def claim_root(root: Path):
+    """Locks the grid's root for this launcher (files.lock_directory). InputError with one line where
+    it is not a writable directory or another launcher holds it: two launchers would each train, and
+    report as failed, the runs the other is training, and sweep them half-trained."""
+    if root.exists() and not root.is_dir():
+        raise InputError(f"--root {root} exists and is not a directory")
+    check_writable(root)
+    try:
+        return lock_directory(root, "another reproduce.py")
+    except LockedError as e:
+        raise InputError(f"{e}; wait for it to finish or choose another --root") from None
+
+
+def reproduce_locked(args: Args, specs: list[RunSpec], results: Path) -> int:
     todo = [s for s in specs if not s.final_checkpoint.exists()]
     print(grid_state(specs), file=sys.stderr)
     tally = Tally(len(specs), len(specs) - len(todo))

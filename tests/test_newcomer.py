@@ -1,17 +1,19 @@
 """What a newcomer broke (issue 37): a killed sweep worker, tasks outside the paper, runs of another grid,
 two launchers on one root, a hand-edited episodes.csv, the exit-code rule and the one-line errors."""
 
+import os
 import subprocess
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
-from conftest import ROOT
+from conftest import ROOT, one_line_error, run_script
 from test_plots import episode_rows, run_cli, write_episodes
 
 import eval_gamma_sweep as sweep
 import reproduce
+from pgg_utils.files import lock_directory
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 FORMAT_2 = FIXTURES / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
@@ -106,3 +108,23 @@ def test_runs_trained_with_other_arguments_are_refused_and_never_swept(tmp_path,
     swept = {line.split(",")[3] for line in (tmp_path / "second" / "episodes.csv").read_text().splitlines()[1:]}
     assert swept == {"CartPole-v1__ppo__s2"}
     assert "**1k Steps**" in (tmp_path / "second" / "table_discrete.md").read_text()
+
+
+# --- 4. two launchers on one root -----------------------------------------------------------------------
+
+QUICK = ["--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--checkpoint-interval", "512",
+         "--gammas", "1", "--episodes", "2", "--workers", "1"]  # fmt: skip
+
+
+def test_a_second_launcher_on_a_root_in_use_is_refused_in_one_line(tmp_path):
+    root = tmp_path / "runs"
+    root.mkdir()
+    first = lock_directory(root, "another reproduce.py")  # as the first launcher holds it, training
+    try:
+        second = run_script("reproduce.py", *QUICK, "--root", str(root), "--results", str(tmp_path / "results"))
+    finally:
+        first.close()
+    line = one_line_error(second)
+    assert line == (f"error: {root} is in use by another reproduce.py (pid {os.getpid()}); wait for it to finish or "
+                    "choose another --root")  # fmt: skip
+    assert [p.name for p in root.iterdir()] == [".lock"]  # nothing trained
