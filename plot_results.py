@@ -185,7 +185,8 @@ def read_episodes(paths) -> list[dict]:
                 raise InputError(
                     f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?"
                 )
-            for row in reader:
+            for line, row in enumerate(reader, start=2):
+                check_values(row, f"{path}, line {line}")
                 row["config"] = row.get("config") or row["variant"]
                 row["kind"] = kind_of(row, path)
                 row["_source"] = str(path)
@@ -193,6 +194,29 @@ def read_episodes(paths) -> list[dict]:
     check_one_kind(rows)
     check_not_pooled(rows)
     return rows
+
+
+NUMBER_COLUMNS = ("return", "train_guidance", "cond_dropout", "eval_guidance")
+INTEGER_COLUMNS = ("step", "seed")
+
+
+def check_values(row: dict, where: str) -> None:
+    """InputError with one line for a value no sweep writes (an edited episodes.csv): a number column
+    that is not a finite number, a step or seed that is not an integer, a return outside what its task
+    allows (figures.RETURN_RANGE)."""
+    for column in (*NUMBER_COLUMNS, *INTEGER_COLUMNS):
+        value = row[column]
+        try:
+            number = int(value) if column in INTEGER_COLUMNS else float(value)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{where}: {column} {value!r} is not a{'n integer' if column in INTEGER_COLUMNS else ' number'}"
+            ) from None
+        if not math.isfinite(number):
+            raise InputError(f"{where}: {column} {value!r} is not finite")
+    low, high = figures.RETURN_RANGE.get(row["env_id"], (-math.inf, math.inf))
+    if not low <= float(row["return"]) <= high:
+        raise InputError(f"{where}: return {row['return']} is outside what {row['env_id']} allows, [{low:g}, {high:g}]")
 
 
 def kind_of(row: dict, path: Path) -> str:

@@ -8,6 +8,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
 from conftest import ROOT, one_line_error, run_script
 from test_plots import episode_rows, run_cli, write_episodes
 
@@ -128,3 +129,30 @@ def test_a_second_launcher_on_a_root_in_use_is_refused_in_one_line(tmp_path):
     assert line == (f"error: {root} is in use by another reproduce.py (pid {os.getpid()}); wait for it to finish or "
                     "choose another --root")  # fmt: skip
     assert [p.name for p in root.iterdir()] == [".lock"]  # nothing trained
+
+
+# --- 5. a hand-edited episodes.csv ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("value,message", [
+    ("abc", "return 'abc' is not a number"),
+    ("nan", "return 'nan' is not finite"),
+    ("inf", "return 'inf' is not finite"),
+    ("99999", "return 99999 is outside what CartPole-v1 allows, [0, 500]"),
+    ("-1", "return -1 is outside what CartPole-v1 allows, [0, 500]"),
+])  # fmt: skip
+def test_an_edited_return_is_one_line_naming_the_line_and_exit_2(tmp_path, value, message):
+    rows = episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [100.0, 200.0, 300.0]})
+    rows[3]["return"] = value
+    write_episodes(tmp_path / "episodes.csv", rows)
+    done = run_cli(tmp_path / "episodes.csv", "--output", tmp_path / "out")
+    assert one_line_error(done) == f"error: {tmp_path / 'episodes.csv'}, line 5: {message}"
+    assert not (tmp_path / "out" / "table_discrete.md").exists()
+
+
+def test_an_edited_step_is_one_line(tmp_path):
+    rows = episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [100.0, 200.0]})
+    rows[0]["step"] = "1e3"
+    write_episodes(tmp_path / "episodes.csv", rows)
+    done = run_cli(tmp_path / "episodes.csv", "--output", tmp_path / "out")
+    assert one_line_error(done) == f"error: {tmp_path / 'episodes.csv'}, line 2: step '1e3' is not an integer"
