@@ -740,18 +740,12 @@ def manifest_names(output: Path, paths) -> set[str]:
 
 def main() -> None:
     args = tyro.cli(Args)
-    try:
-        written = generate(args)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
-        message = f"cannot write {e.filename}: {e.strerror}" if e.filename else e.strerror or str(e)
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        print("interrupted; the outputs written so far are complete files", file=sys.stderr)
-        sys.exit(130)
+    with files.one_line_errors():
+        try:
+            written = generate(args)
+        except KeyboardInterrupt:
+            print("interrupted; the outputs written so far are complete files", file=sys.stderr)
+            sys.exit(130)
     for path in written:
         print(path)
 

@@ -37,7 +37,15 @@ import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import paper, processes, runs
 from pgg_utils.arguments import guidance_error
-from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, lock_holder, write_atomic
+from pgg_utils.files import (
+    InputError,
+    LockedError,
+    check_writable,
+    lock_directory,
+    lock_holder,
+    one_line_errors,
+    write_atomic,
+)
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
@@ -481,18 +489,14 @@ def main() -> None:
                 job.cancel(check=False)
             except Exception:  # noqa: S110  a job that already ended, or a scheduler that is gone
                 pass
+        print(f"interrupted ({signal.Signals(signum).name}): finished runs, checkpoints and sweep cells are kept; "
+              "rerun the same command to continue", file=sys.stderr, flush=True)  # fmt: skip
         os._exit(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
-    try:
+    with one_line_errors():  # files.exit_status's rule; finished runs and cells stay
         failed = reproduce(args)
-    except (InputError, eval_gamma_sweep.InputError, plot_results.InputError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # e.g. a full disk while writing results; finished runs and cells stay
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(1)
     sys.exit(1 if failed else 0)
 
 

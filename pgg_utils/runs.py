@@ -26,7 +26,7 @@ import numpy as np
 import torch
 
 from pgg_utils.arguments import ARGUMENT_RULES, guidance_error, run_name_error, training_arguments
-from pgg_utils.files import InputError, LockedError, lock_directory, write_atomic
+from pgg_utils.files import InputError, LockedError, exit_status, lock_directory, write_atomic
 from pgg_utils.progress import Progress
 
 # 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
@@ -681,20 +681,27 @@ def train_in_process(script, args) -> Path:
 def launch(args, kind: str, script: str, train) -> None:
     """A training script's `main` after parsing: checks every argument before the disk is touched,
     prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
-    exit 2 for bad arguments or a run directory that must not be used or cannot be written, 130 for
-    Ctrl-C, 1 for a full disk during training or a non-finite run (its earlier checkpoints kept)."""
-    error = argument_error(args, kind)
+    files.exit_status's rule: exit 2 for bad arguments or a run directory that must not be used or
+    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts) or a non-finite run
+    (its earlier checkpoints kept)."""
+    error, status = argument_error(args, kind), 2
     run = None
     if error is None:
         try:
             run = Run.prepare(args, kind, Path(script))
         except RunDirError as e:
             error = str(e)
-        except OSError as e:
-            error = f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
+        except OSError as e:  # write_atomic's name the file; a full disk is exit 1, a folder we may not write 2
+            written = e.strerror and e.strerror.startswith("cannot write")
+            error = (
+                e.strerror
+                if written
+                else f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
+            )
+            status = exit_status(e)
     if error is not None:
         print(f"error: {error}", file=sys.stderr)
-        sys.exit(2)
+        sys.exit(status)
     for note in run.notes:
         print(f"note: {note}", file=sys.stderr)
     print(f"run directory: {run.dir}")
@@ -713,9 +720,10 @@ def launch(args, kind: str, script: str, train) -> None:
             print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
             sys.exit(130)
         message = str(e)
-        if isinstance(e, OSError):  # write_atomic's name the file; TensorBoard's name nothing
+        if isinstance(e, OSError):  # write_atomic's name the file; TensorBoard's name nothing: its newest events file
             written = e.strerror and e.strerror.startswith("cannot write")
-            message = e.strerror if written else f"cannot write in {run.dir}: {e.strerror or e}"
+            events = sorted(run.dir.glob("events.out.tfevents.*"), key=lambda path: path.stat().st_mtime)
+            message = e.strerror if written else f"cannot write {events[-1] if events else run.dir}: {e.strerror or e}"
             message += f"; checkpoints up to {latest.name} are kept" if latest else ""
         print(f"error: {message}", file=sys.stderr)
         sys.exit(1)

@@ -1,6 +1,7 @@
 """What a newcomer broke (issue 37): a killed sweep worker, tasks outside the paper, runs of another grid,
 two launchers on one root, a hand-edited episodes.csv, the exit-code rule and the one-line errors."""
 
+import errno
 import os
 import subprocess
 import sys
@@ -13,7 +14,10 @@ from conftest import ROOT, one_line_error, run_script
 from test_plots import episode_rows, run_cli, write_episodes
 
 import eval_gamma_sweep as sweep
+import plot_results
+import ppo_pgg_discrete
 import reproduce
+from pgg_utils import files
 from pgg_utils.files import lock_directory
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -156,3 +160,54 @@ def test_an_edited_step_is_one_line(tmp_path):
     write_episodes(tmp_path / "episodes.csv", rows)
     done = run_cli(tmp_path / "episodes.csv", "--output", tmp_path / "out")
     assert one_line_error(done) == f"error: {tmp_path / 'episodes.csv'}, line 2: step '1e3' is not an integer"
+
+
+# --- 6. one exit-code rule: 2 bad input, 1 failed at run time, 130 Ctrl-C --------------------------------
+
+
+def full_disk_main(script: str, tmp_path: Path) -> tuple[str, list]:
+    """A script's main, argv and the output it should name, for a disk that is full from the start."""
+    sweep_csv = tmp_path / "sweep" / "episodes.csv"
+    write_episodes(sweep_csv, episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [100.0, 200.0]}))
+    return {
+        "ppo_pgg_discrete.py": (ppo_pgg_discrete.main, ["--total-timesteps", "512", "--num-steps", "128",
+                                                        "--checkpoint-interval", "512", "--output-dir", str(tmp_path / "runs"),
+                                                        "--run-name", "full"], tmp_path / "runs" / "full" / "args.json"),
+        "eval_gamma_sweep.py": (sweep.main, [str(FORMAT_2), "--gammas", "1", "--episodes", "2", "--output",
+                                             str(tmp_path / "out")], tmp_path / "out" / "cells"),
+        "plot_results.py": (plot_results.main, [str(sweep_csv), "--output", str(tmp_path / "out")], tmp_path / "out"),
+    }[script]  # fmt: skip
+
+
+@pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py"])
+def test_a_full_disk_is_exit_1_naming_the_file_in_every_script(tmp_path, monkeypatch, capsys, script):
+    def rename_on_a_full_disk(source, target):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    main, argv, named = full_disk_main(script, tmp_path)
+    monkeypatch.setattr(files.os, "replace", rename_on_a_full_disk)
+    monkeypatch.setattr(sys, "argv", [script, *argv])
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    errors = error_lines(capsys.readouterr().err)
+    assert exit_info.value.code == 1 and len(errors) == 1, errors
+    assert errors[0].startswith(f"error: cannot write {named}") and errors[0].endswith("No space left on device"), (
+        errors
+    )
+
+
+@pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py", "reproduce.py"])
+def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
+    taken = tmp_path / "taken"
+    taken.write_text("")
+    flags = {"ppo_pgg_discrete.py": ["--output-dir", str(taken)],
+             "eval_gamma_sweep.py": [str(FORMAT_2), "--output", str(taken)],
+             "plot_results.py": [str(FORMAT_2.parent), "--output", str(taken)],
+             "reproduce.py": [*QUICK, "--root", str(taken)]}[script]  # fmt: skip
+    if script == "plot_results.py":
+        write_episodes(
+            tmp_path / "sweep" / "episodes.csv", episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [1.0, 2.0]})
+        )
+        flags[0] = str(tmp_path / "sweep")
+    line = one_line_error(run_script(script, *flags))
+    assert str(taken) in line, line
