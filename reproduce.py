@@ -19,7 +19,9 @@ requeued and resume the same way. The sweep CSVs, tables and figures go to <resu
 """
 
 import contextlib
+import importlib.util
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -141,6 +143,10 @@ def argument_error(args: Args) -> str | None:
                         ("--slurm-array-parallelism", args.slurm_array_parallelism)):  # fmt: skip
         if value is not None and value <= 0:
             return f"{flag} must be positive, got {value}"
+    if args.executor != "local" and importlib.util.find_spec("submitit") is None:
+        return f"--executor {args.executor} needs submitit (pip install submitit)"
+    if args.executor == "slurm" and not (shutil.which("srun") and shutil.which("sbatch")):
+        return "--executor slurm needs Slurm (srun and sbatch on PATH); without a cluster use --executor local or submitit-local"
     for gamma in chosen.gammas or ():
         if error := guidance_error(gamma, "--gammas"):
             return error

@@ -9,6 +9,7 @@ import io
 import json
 import math
 import os
+import pickle
 import platform
 import random
 import shutil
@@ -71,11 +72,17 @@ def env_error(env_id: str, kind: str, capture_video: bool = False) -> str | None
             return "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); with a newer mujoco use Pusher-v5"
         return f"cannot make environment {env_id!r}: {e}"
     except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
-        return f"cannot make environment {env_id!r}: {e}"
+        backend = os.environ.get("MUJOCO_GL")
+        hint = (f" (MUJOCO_GL={backend}: is its library installed? osmesa needs apt-get install libosmesa6, egl "
+                "libegl1)" if backend and capture_video else "")  # fmt: skip
+        return f"cannot make environment {env_id!r}: {e}{hint}"
     action_space, observation_space = env.action_space, env.observation_space
     error = video_error(env) if capture_video else None
     env.close()
     wanted, other = (gym.spaces.Discrete, "continuous") if kind == "discrete" else (gym.spaces.Box, "discrete")
+    if not isinstance(action_space, (gym.spaces.Discrete, gym.spaces.Box)):
+        return (f"{env_id} has a {type(action_space).__name__} action space; neither script trains it "
+                "(ppo_pgg_discrete.py: Discrete, ppo_pgg_continuous.py: Box)")  # fmt: skip
     if not isinstance(action_space, wanted):
         return (f"{env_id} has a {type(action_space).__name__} action space; this script needs "
                 f"{wanted.__name__} (use ppo_pgg_{other}.py)")  # fmt: skip
@@ -238,6 +245,9 @@ def read_checkpoint_file(path: Path) -> dict:
     """A checkpoint dict, pickle-free (weights_only). ValueError with one line for anything unreadable."""
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError:  # torch's message advises weights_only=False: running the file's code
+        raise ValueError("not a PGG checkpoint (it holds Python objects beyond tensors and plain values, which "
+                         "these scripts never write and a pickle-free load refuses)") from None  # fmt: skip
     except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
         first_line = str(e).splitlines()[0] if str(e) else ""
         raise ValueError(f"unreadable checkpoint ({type(e).__name__}: {first_line})") from None

@@ -1,15 +1,21 @@
 """What a newcomer broke (issue 37): a killed sweep worker, tasks outside the paper, runs of another grid,
 two launchers on one root, a hand-edited episodes.csv, the exit-code rule and the one-line errors."""
 
+import argparse
+import ctypes.util
 import errno
 import os
+import shutil
 import subprocess
 import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
+import gymnasium as gym
+import numpy as np
 import pytest
+import torch
 from conftest import ROOT, one_line_error, run_script
 from test_plots import episode_rows, run_cli, write_episodes
 
@@ -17,7 +23,7 @@ import eval_gamma_sweep as sweep
 import plot_results
 import ppo_pgg_discrete
 import reproduce
-from pgg_utils import files
+from pgg_utils import files, runs
 from pgg_utils.files import lock_directory
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -211,3 +217,49 @@ def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
         flags[0] = str(tmp_path / "sweep")
     line = one_line_error(run_script(script, *flags))
     assert str(taken) in line, line
+
+
+# --- 7. one line of error where the scripts write the error ----------------------------------------------
+
+
+@pytest.mark.skipif(shutil.which("srun") is not None, reason="Slurm is installed here")
+def test_slurm_without_slurm_is_one_line_before_anything_is_trained(tmp_path):
+    done = run_script("reproduce.py", *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
+    assert "--executor slurm needs Slurm (srun and sbatch on PATH)" in one_line_error(done)
+    assert not (tmp_path / "runs").exists()
+
+
+class MultiDiscreteEnv(gym.Env):
+    observation_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+    action_space = gym.spaces.MultiDiscrete([2, 3])
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_an_action_space_neither_script_trains_gets_no_circular_advice(kind):
+    gym.register("NewcomerMultiDiscrete-v0", entry_point=MultiDiscreteEnv)
+    try:
+        error = runs.env_error("NewcomerMultiDiscrete-v0", kind)
+    finally:
+        del gym.registry["NewcomerMultiDiscrete-v0"]
+    assert error == ("NewcomerMultiDiscrete-v0 has a MultiDiscrete action space; neither script trains it "
+                     "(ppo_pgg_discrete.py: Discrete, ppo_pgg_continuous.py: Box)")  # fmt: skip
+
+
+def test_a_file_of_python_objects_is_refused_without_torchs_advice_to_unpickle_it(tmp_path):
+    foreign = tmp_path / "run" / "checkpoints" / "step_000000512.pt"
+    foreign.parent.mkdir(parents=True)
+    torch.save({"model": argparse.Namespace()}, foreign)
+    done = run_script("eval_gamma_sweep.py", str(foreign), "--video", str(tmp_path / "videos"))
+    line = one_line_error(done)
+    assert "not a PGG checkpoint (it holds Python objects" in line and "weights_only" not in line, line
+
+
+@pytest.mark.skipif(ctypes.util.find_library("OSMesa") is not None, reason="OSMesa is installed here")
+def test_osmesa_without_its_library_names_the_package(tmp_path):
+    env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
+    done = run_script("ppo_pgg_continuous.py", "--env-id", "Hopper-v4", "--capture-video", "--output-dir",
+                      str(tmp_path), env=env)  # fmt: skip
+    assert "osmesa needs apt-get install libosmesa6" in one_line_error(done)
