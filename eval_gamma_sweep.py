@@ -392,8 +392,6 @@ def run_job(job: Job) -> JobResult:
         config = config_label(ckpt)
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
-    if uniform_null and ckpt["action_space"] != "discrete":
-        return JobResult(job, digest, [], 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
     returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
     train_args = ckpt["args"]
@@ -558,6 +556,9 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
             continue
         except Exception as e:
             skipped.append(f"{checkpoint}: not a PGG checkpoint ({type(e).__name__}: {e})")
+            continue
+        if args.uniform_null and kind != "discrete":  # once per checkpoint, not once per cell
+            skipped.append(f"{checkpoint}: --uniform-null applies to discrete checkpoints only")
             continue
         other = experiments.setdefault(identity, checkpoint)
         if other != checkpoint:
