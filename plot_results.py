@@ -719,8 +719,8 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
     if args.runs:
         save_figure(figures.learning_curves(training_curves(args.runs)), output / "learning_curves", written)
-    comparison = compare_with_paper(summary) if args.compare_paper else []
-    if comparison:  # none where no swept task is the paper's: their tables and figures are the results
+    comparison = compare_with_paper(summary) if args.compare_paper else None
+    if comparison is not None:  # None where no swept task is the paper's: their tables and figures are the results
         tasks = task_summaries(comparison, summary)
         write_csv(output / "compare_paper.csv", comparison, written)
         write_csv(output / "compare_paper_tasks.csv", tasks, written)

@@ -416,7 +416,7 @@ def reproduce_locked(args: Args, specs: list[RunSpec], results: Path) -> int:
               "(choose another --root, or delete them)", file=sys.stderr)  # fmt: skip
     swept = [s for s in specs if s not in stale and s.last_step() is not None]
     if not swept:
-        raise InputError("no run of this grid has any checkpoint to sweep")
+        raise InputError("no run has any checkpoint to sweep")
     unfinished = [unfinished_note(s) for s in swept if not s.final_checkpoint.exists()]
     if unfinished:
         print(f"note: unfinished, so swept up to the last checkpoint: {'; '.join(unfinished)}", file=sys.stderr)

@@ -103,10 +103,10 @@ def kinds_of(summary: list[dict]) -> dict:
     return {r["env_id"]: r["kind"] for r in summary}
 
 
-def compare_with_paper(summary: list[dict]) -> list[dict]:
+def compare_with_paper(summary: list[dict]) -> list[dict] | None:
     """Our cells beside the paper's, each tested (Welch, Holm over the cells of one of the paper's
     tables, i.e. per kind), and our final PPO cells beside CleanRL's published PPO (Holm over those).
-    No rows, with one note, where none of the swept envs is the paper's."""
+    None, with one note, where none of the swept envs is the paper's."""
     with open(PAPER_DATA, newline="") as f:
         paper = list(csv.DictReader(f))
     paper_envs = {p["env_id"] for p in paper}
@@ -115,7 +115,7 @@ def compare_with_paper(summary: list[dict]) -> list[dict]:
     if len(absent) == len(swept):
         print(f"note: none of the swept envs ({', '.join(absent)}) is in the paper's tables: nothing to compare",
               file=sys.stderr)  # fmt: skip
-        return []
+        return None
     for env in absent:
         print(f"note: {env} is not in the paper's tables; left out of the comparison", file=sys.stderr)
     kinds = kinds_of(summary)
