@@ -44,6 +44,8 @@ import signal
 import sys
 import time
 from collections import defaultdict
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
@@ -59,7 +61,15 @@ from pgg_utils import runs
 from pgg_utils.arguments import guidance_error
 from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
 from pgg_utils.fast import MIN_FORWARD_ROWS
-from pgg_utils.files import InputError, LockedError, check_writable, lock_directory, write_csv_atomic
+from pgg_utils.files import (
+    InputError,
+    LockedError,
+    RuntimeFailure,
+    check_writable,
+    lock_directory,
+    one_line_errors,
+    write_csv_atomic,
+)
 from pgg_utils.identity import config_label, run_identity
 from pgg_utils.paper import PAPER_GAMMAS
 from pgg_utils.processes import die_with_parent
@@ -285,8 +295,6 @@ def run_job(job: Job) -> JobResult:
         config = config_label(ckpt)
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
-    if uniform_null and ckpt["action_space"] != "discrete":
-        return JobResult(job, digest, [], 0, f"{job.checkpoint}: --uniform-null applies to discrete checkpoints only")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
     returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
     identity = run_identity(ckpt["args"], ckpt["action_space"])
@@ -391,12 +399,46 @@ def claim_output(output: Path):
         raise InputError(f"cannot write to {output}: {e.strerror or e}") from None
 
 
+class WorkerDied(RuntimeFailure):
+    """A worker ended while the sweep ran (the kernel's OOM killer sends SIGKILL); one line."""
+
+
 def init_worker(parent_pid: int) -> None:
     """Pool initializer: a worker leaves Ctrl-C to the parent (which ends the workers), and dies with
     the parent however the parent dies."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # pool.terminate's signal, not a handler inherited from the parent
+    signal.signal(
+        signal.SIGTERM, signal.SIG_DFL
+    )  # the pool's signal to end it, not a handler inherited from the parent
     die_with_parent(parent_pid)
+
+
+def start_pool(workers: int, jobs: list[Job]) -> tuple[ProcessPoolExecutor, dict, dict]:
+    """(the pool, {future: job} of every job submitted to it, {pid: process} of its workers). Forked
+    workers are all started by the first submit, from this thread (their death signal is tied to the
+    thread that forks them). Unlike multiprocessing.Pool, which replaces a worker that dies and waits
+    forever for the cell it held, this pool breaks: every unfinished cell fails with BrokenProcessPool."""
+    pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), init_worker, (os.getpid(),))
+    pool.submit(os.getpid)  # starts the workers; they are counted before any can die in a cell
+    processes = {p.pid: p for p in multiprocessing.active_children()}
+    return pool, {pool.submit(run_job, job): job for job in jobs}, processes
+
+
+def stop_pool(pool: ProcessPoolExecutor, processes: dict) -> None:
+    """Ends the workers now, their cells in flight lost (Ctrl-C, or a pool broken by a dead worker)."""
+    pool.shutdown(wait=False, cancel_futures=True)
+    for process in processes.values():
+        process.terminate()  # SIGTERM, which how_workers_died tells from any other end
+    for process in processes.values():
+        process.join()
+    pool.shutdown(wait=True)
+
+
+def how_workers_died(processes: dict) -> str:
+    """`pid 123 was killed by SIGKILL`: the workers that ended before the pool ended them (with SIGTERM)."""
+    ended = [(pid, p.exitcode) for pid, p in processes.items() if p.exitcode not in (None, -signal.SIGTERM)]
+    return ", ".join(f"pid {pid} " + (f"was killed by {signal.Signals(-code).name}" if code < 0
+                                      else f"exited with status {code}") for pid, code in ended) or "a worker ended"  # fmt: skip
 
 
 def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skipped: list[str]) -> tuple[dict, dict]:
@@ -417,6 +459,9 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
             continue
         except Exception as e:
             skipped.append(f"{checkpoint}: not a PGG checkpoint ({type(e).__name__}: {e})")
+            continue
+        if args.uniform_null and kind != "discrete":  # once per checkpoint, not once per cell
+            skipped.append(f"{checkpoint}: --uniform-null applies to discrete checkpoints only")
             continue
         other = experiments.setdefault(identity, checkpoint)
         if other != checkpoint:
@@ -475,6 +520,9 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
             f"{len(finished)} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "
             "rerun the same command to evaluate the rest"
         ) from None
+    except WorkerDied as e:
+        raise WorkerDied(f"{e}; {len(finished)} of the sweep's {len(cells)} cells are finished in {output / 'cells'}: "
+                         "rerun the same command to evaluate the rest") from None  # fmt: skip
     for reason in skipped:
         print(f"skipped {reason}", file=sys.stderr)
     listed = f"; skipped {len(skipped)} checkpoint(s), listed in {output / 'skipped.csv'}" if skipped else ""
@@ -495,12 +543,14 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
     if not jobs:
         return set()
     progress = Progress(label="sweep", total=len(jobs), unit="cells", interval=0, stream=sys.stderr)
-    handled, env_steps, start, changed, pool = 0, 0, time.time(), set(), None
+    handled, env_steps, start, changed, pool, broken = 0, 0, time.time(), set(), None, False
     try:
         if args.workers > 1 and len(jobs) > 1:
-            context = multiprocessing.get_context("fork")
-            pool = context.Pool(min(args.workers, len(jobs)), initializer=init_worker, initargs=(os.getpid(),))
-        for result in pool.imap_unordered(run_job, jobs) if pool else map(run_job, jobs):
+            pool, futures, processes = start_pool(min(args.workers, len(jobs)), jobs)
+            results = (f.result() for f in as_completed(futures) if not isinstance(f.exception(), BrokenProcessPool))
+        else:
+            results = map(run_job, jobs)
+        for result in results:
             job, handled = result.job, handled + 1
             if result.error:
                 skipped.append(result.error)
@@ -517,11 +567,13 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
             elapsed = time.time() - start
             rate = env_steps / max(elapsed, 1e-9)
             progress.update(handled, f"{rate:,.0f} env steps/s  elapsed {format_duration(elapsed)}")
+        broken = pool is not None and handled < len(jobs)  # the failed futures: BrokenProcessPool, all of them
     finally:
         progress.close()
         if pool:
-            pool.terminate()
-            pool.join()
+            stop_pool(pool, processes)
+    if broken:
+        raise WorkerDied(f"a sweep worker died ({how_workers_died(processes)}) and the cells in flight with it")
     return changed
 
 
@@ -584,24 +636,18 @@ def record_videos(args: Args) -> list[Path]:
 
 def main() -> None:
     args = tyro.cli(Args, description=__doc__)
-    try:
-        if args.video is not None:
-            check_args(args)
-            for path in record_videos(args):
-                print(path)
-            return
-        sweep(args)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt as e:
-        print(f"interrupted: {e}" if isinstance(e, SweepInterrupted) else "interrupted before any cell was evaluated",
-              file=sys.stderr)  # fmt: skip
-        sys.exit(130)
-    except OSError as e:  # e.g. the disk filled up during the sweep; files.write_atomic's names the file
-        message = e.strerror or str(e)
-        print(f"error: {message}: {e.filename}" if e.filename else f"error: {message}", file=sys.stderr)
-        sys.exit(1)
+    with one_line_errors():
+        try:
+            if args.video is not None:
+                check_args(args)
+                for path in record_videos(args):
+                    print(path)
+                return
+            sweep(args)
+        except KeyboardInterrupt as e:
+            print(f"interrupted: {e}" if isinstance(e, SweepInterrupted) else "interrupted before any cell was evaluated",
+                  file=sys.stderr)  # fmt: skip
+            sys.exit(130)
 
 
 if __name__ == "__main__":

@@ -25,9 +25,10 @@ Writes into --output (and prints each path):
   table_<kind>_ppo_sweep.*      the vanilla PPO checkpoints swept over γ (not in the paper)
   fig_<kind>_<variant>.png/pdf  the paper's figures: return against training steps, PPO solid black,
                                 one dashed line per eval γ (one colour per γ in every figure), 95% CI
-                                as band and error bars; continuous: the paper's six tasks in 2×3, "not
-                                run" where no data; the dropout figure the paper's γ 1.0-1.2 only, the
-                                other swept γ in fig_continuous_pgg_drop0.1_beyond_paper
+                                as band and error bars; only the tasks and variants swept, in the paper's
+                                order and its 2×3 grid where the tasks are all the paper's; the continuous
+                                dropout figure the paper's γ 1.0-1.2 only, the other swept γ in
+                                fig_continuous_pgg_drop0.1_beyond_paper
   gamma_response_<kind>.png/pdf return against eval γ at one step, one line per variant
   learning_curves.png/pdf       (--runs) episodic training return against steps, mean and CI over seeds
   best_gamma.md / .csv          the best eval γ per env, variant and step
@@ -53,6 +54,7 @@ Writes into --output (and prints each path):
 
 import csv
 import json
+import logging
 import math
 import sys
 from collections import defaultdict
@@ -81,7 +83,7 @@ from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.figures import cell_index, ordered_series
 from pgg_utils.files import MANIFEST, InputError, read_csv, read_manifest, remove_stale, write_atomic, write_manifest
 from pgg_utils.identity import variant_id
-from pgg_utils.paper import PAPER_ENVS, VARIANTS, action_kind, is_mujoco, paper_name, variant_rank
+from pgg_utils.paper import PAPER_ENVS, action_kind, is_mujoco, paper_name, variant_rank
 from pgg_utils.seeds import check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 
@@ -101,16 +103,14 @@ PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}
 class Args:
     sweeps: tyro.conf.Positional[tuple[str, ...]] = ()
     """sweep output directories (holding episodes.csv) or episodes.csv files"""
-    output: str = "results"
-    """directory for every table and figure"""
+    output: str = "plots"
+    """directory for every table and figure (not the committed results/ unless named)"""
     runs: tuple[str, ...] = ()
     """run directories or roots whose TensorBoard events give the learning curves"""
     compare_paper: bool = False
     """test our cells against the paper's published numbers (data/paper_results.csv) and CleanRL's PPO"""
     provenance: str | None = None
     """CSV naming, for each input CSV, the commits, MuJoCo version and machine behind it (results/provenance.csv)"""
-    paper_layout: bool = True
-    """continuous figures in the paper's 2×3 layout, every task ("not run" where there is no data) and a figure per paper variant; --no-paper-layout draws only what was swept"""
     response_step: int | None = None
     """checkpoint step of the γ-response plot; None: the last step of each env"""
     policy: str = "sample"
@@ -189,7 +189,8 @@ def read_episodes(paths) -> list[dict]:
                 raise InputError(
                     f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?"
                 )
-            for row in reader:
+            for line, row in enumerate(reader, start=2):
+                check_values(row, f"{path}, line {line}")
                 row["config"] = row.get("config") or row["variant"]
                 row["kind"] = kind_of(row, path)
                 row["_source"] = str(path)
@@ -197,6 +198,29 @@ def read_episodes(paths) -> list[dict]:
     check_one_kind(rows)
     check_not_pooled(rows)
     return rows
+
+
+NUMBER_COLUMNS = ("return", "train_guidance", "cond_dropout", "eval_guidance")
+INTEGER_COLUMNS = ("step", "seed")
+
+
+def check_values(row: dict, where: str) -> None:
+    """InputError with one line for a value no sweep writes (an edited episodes.csv): a number column
+    that is not a finite number, a step or seed that is not an integer, a return outside what its task
+    allows (figures.RETURN_RANGE)."""
+    for column in (*NUMBER_COLUMNS, *INTEGER_COLUMNS):
+        value = row[column]
+        try:
+            number = int(value) if column in INTEGER_COLUMNS else float(value)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{where}: {column} {value!r} is not a{'n integer' if column in INTEGER_COLUMNS else ' number'}"
+            ) from None
+        if not math.isfinite(number):
+            raise InputError(f"{where}: {column} {value!r} is not finite")
+    low, high = figures.RETURN_RANGE.get(row["env_id"], (-math.inf, math.inf))
+    if not low <= float(row["return"]) <= high:
+        raise InputError(f"{where}: return {row['return']} is outside what {row['env_id']} allows, [{low:g}, {high:g}]")
 
 
 def kind_of(row: dict, path: Path) -> str:
@@ -342,6 +366,9 @@ def training_curves(run_paths) -> dict:
     runs = []  # (run arguments, variant, steps, returns, run directory)
     for args_file in run_args_files(run_paths):
         run_args = json.loads(args_file.read_text())
+        # A resumed run's events overlap the first session's past its checkpoint: the reader drops them,
+        # as it should, with a warning per file that is no news to the user.
+        logging.getLogger("tensorboard").setLevel(logging.ERROR)
         accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
         accumulator.Reload()
         if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
@@ -490,7 +517,7 @@ def table_rows(summary: list[dict], envs: list[str], ppo_sweep: bool, latex: boo
                 yield ("row", row_label, [fmt_cell(cells.get((e, variant, series, step, gamma)), latex) for e in envs])
 
 
-def table_notes(summary, envs, latex: bool, paper_layout: bool = True) -> list[str]:
+def table_notes(summary, envs, latex: bool) -> list[str]:
     notes = []
     others = sorted({(r["env_id"], r["mujoco"]) for r in summary if other_mujoco(r)})
     if others:
@@ -499,14 +526,10 @@ def table_notes(summary, envs, latex: bool, paper_layout: bool = True) -> list[s
         rest = f"; the other cells MuJoCo {', '.join(recorded)}" if recorded else ""
         dagger = "$^\\dagger$" if latex else "†"
         notes.append(f"{dagger} from a MuJoCo other than {REFERENCE_MUJOCO}: {where}{rest}.")
-    kind = summary[0]["kind"] if summary else "discrete"
-    missing = [e for e in PAPER_ENVS.get(kind, ()) if e not in envs]
-    if missing and kind == "continuous" and paper_layout:
-        notes.append(f"Not run: {', '.join(missing)}.")
     return notes
 
 
-def markdown_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) -> str:
+def markdown_table(summary, envs, ppo_sweep=False, title="") -> str:
     lines = [f"**{title}** (mean ± 95% CI over seeds)", "", "| Method | " + " | ".join(envs) + " |",
              "|---|" + "---|" * len(envs)]  # fmt: skip
     for item in table_rows(summary, envs, ppo_sweep, latex=False):
@@ -514,11 +537,11 @@ def markdown_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) 
             lines.append(f"| **{item[1]}** |" + " |" * len(envs))
         else:
             lines.append(f"| {item[1]} | " + " | ".join(item[2] or [""] * len(envs)) + " |")
-    notes = table_notes(summary, envs, latex=False, paper_layout=paper_layout)
+    notes = table_notes(summary, envs, latex=False)
     return "\n".join(lines + ([""] + notes if notes else [])) + "\n"
 
 
-def latex_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) -> str:
+def latex_table(summary, envs, ppo_sweep=False, title="") -> str:
     columns = len(envs) + 1
     body = []
     for item in table_rows(summary, envs, ppo_sweep, latex=True):
@@ -527,7 +550,7 @@ def latex_table(summary, envs, ppo_sweep=False, title="", paper_layout=True) -> 
         else:
             body.append(" & ".join([item[1], *(item[2] or [""] * len(envs))]) + " \\\\")
     header = " & ".join(["Method", *envs]) + " \\\\"
-    notes = [n.replace("γ", "$\\gamma$") for n in table_notes(summary, envs, latex=True, paper_layout=paper_layout)]
+    notes = [n.replace("γ", "$\\gamma$") for n in table_notes(summary, envs, latex=True)]
     return "\n".join([
         "\\documentclass{article}", "\\usepackage{booktabs}", "\\usepackage[margin=1cm,landscape]{geometry}",
         "\\begin{document}", "\\begin{table}[h]", "\\centering", "\\small",
@@ -668,23 +691,21 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     for kind, rows in sorted(by_kind.items()):
         envs = sorted({r["env_id"] for r in rows})
         title = f"{kind.capitalize()} environments"
-        layout_args = {"title": title, "paper_layout": args.paper_layout}
-        write(output / f"table_{kind}.md", markdown_table(rows, envs, **layout_args), written)
-        write(output / f"table_{kind}.tex", latex_table(rows, envs, **layout_args), written)
+        write(output / f"table_{kind}.md", markdown_table(rows, envs, title=title), written)
+        write(output / f"table_{kind}.tex", latex_table(rows, envs, title=title), written)
         ppo_gammas = {float(r["eval_guidance"]) for r in rows if r["variant"] == "ppo"}
         if len(ppo_gammas) > 1:
             title = f"Vanilla PPO checkpoints swept over eval guidance ({kind})"
-            layout_args = {"title": title, "paper_layout": args.paper_layout}
-            write(output / f"table_{kind}_ppo_sweep.md", markdown_table(rows, envs, True, **layout_args), written)
-            write(output / f"table_{kind}_ppo_sweep.tex", latex_table(rows, envs, True, **layout_args), written)
-        layout, cols = figures.figure_layout(kind, envs) if args.paper_layout else (envs, None)
-        paper_variants = set(VARIANTS) if kind == "continuous" and args.paper_layout else set()
-        variants = sorted({r["variant"] for r in rows} | paper_variants, key=lambda v: (variant_rank(v), v))
+            write(output / f"table_{kind}_ppo_sweep.md", markdown_table(rows, envs, True, title=title), written)
+            write(output / f"table_{kind}_ppo_sweep.tex", latex_table(rows, envs, True, title=title), written)
+        layout, cols = figures.figure_layout(kind, envs)
+        variants = sorted({r["variant"] for r in rows}, key=lambda v: (variant_rank(v), v))
         for variant in variants:
             swept = {float(r["eval_guidance"]) for r in rows if r["variant"] == variant}
             low, high = PAPER_FIGURE_GAMMAS.get((kind, variant), (-math.inf, math.inf))
             inside = {g for g in swept if low <= g <= high}
-            beside_paper = PAPER_FIGURE_GAMMAS.get((kind, variant)) and args.paper_layout
+            paper_tasks = all(env in PAPER_ENVS[kind] for env in envs)
+            beside_paper = PAPER_FIGURE_GAMMAS.get((kind, variant)) and paper_tasks  # on the paper's y-ranges
             y_limits = figures.PAPER_DROPOUT_FIGURE_YLIM if beside_paper else None
             figure = figures.figure_for_variant(rows, envs, variant, layout, cols, gammas=inside, y_limits=y_limits)
             save_figure(figure, output / f"fig_{kind}_{variant}", written)
@@ -709,8 +730,8 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
             save_figure(figures.aggregate_intervals(of_kind, kind), output / f"aggregate_iqm_{kind}", written)
     if args.runs:
         save_figure(figures.learning_curves(training_curves(args.runs)), output / "learning_curves", written)
-    if args.compare_paper:
-        comparison = compare_with_paper(summary)
+    comparison = compare_with_paper(summary) if args.compare_paper else None
+    if comparison is not None:  # None where no swept task is the paper's: their tables and figures are the results
         tasks = task_summaries(comparison, summary)
         write_csv(output / "compare_paper.csv", comparison, written)
         write_csv(output / "compare_paper_tasks.csv", tasks, written)
@@ -726,18 +747,12 @@ def manifest_names(output: Path, paths) -> set[str]:
 
 def main() -> None:
     args = tyro.cli(Args, description=__doc__)
-    try:
-        written = generate(args)
-    except InputError as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
-        message = f"cannot write {e.filename}: {e.strerror}" if e.filename else e.strerror or str(e)
-        print(f"error: {message}", file=sys.stderr)
-        sys.exit(2)
-    except KeyboardInterrupt:
-        print("interrupted; the outputs written so far are complete files", file=sys.stderr)
-        sys.exit(130)
+    with files.one_line_errors():
+        try:
+            written = generate(args)
+        except KeyboardInterrupt:
+            print("interrupted; the outputs written so far are complete files", file=sys.stderr)
+            sys.exit(130)
     for path in written:
         print(path)
 

@@ -19,13 +19,15 @@ requeued and resume the same way. The sweep CSVs, tables and figures go to <resu
 """
 
 import contextlib
+import importlib.util
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
-from dataclasses import dataclass, fields
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -33,13 +35,24 @@ import tyro
 
 import eval_gamma_sweep
 import plot_results
+import ppo_pgg_continuous
+import ppo_pgg_discrete
 from pgg_utils import paper, processes, runs
 from pgg_utils.arguments import guidance_error
-from pgg_utils.files import InputError, lock_holder, write_atomic
+from pgg_utils.files import (
+    InputError,
+    LockedError,
+    check_writable,
+    lock_directory,
+    lock_holder,
+    one_line_errors,
+    write_atomic,
+)
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
 SCRIPTS = {"discrete": ROOT / "ppo_pgg_discrete.py", "continuous": ROOT / "ppo_pgg_continuous.py"}
+TRAINING_MODULES = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
 
 
 @dataclass(frozen=True)
@@ -132,6 +145,10 @@ def argument_error(args: Args) -> str | None:
                         ("--slurm-array-parallelism", args.slurm_array_parallelism)):  # fmt: skip
         if value is not None and value <= 0:
             return f"{flag} must be positive, got {value}"
+    if args.executor != "local" and importlib.util.find_spec("submitit") is None:
+        return f"--executor {args.executor} needs submitit (pip install submitit)"
+    if args.executor == "slurm" and not (shutil.which("srun") and shutil.which("sbatch")):
+        return "--executor slurm needs Slurm (srun and sbatch on PATH); without a cluster use --executor local or submitit-local"
     for gamma in chosen.gammas or ():
         if error := guidance_error(gamma, "--gammas"):
             return error
@@ -338,6 +355,23 @@ def run_submitit(todo: list[RunSpec], tally: Tally, args: Args) -> None:
             tally.show(f"{len(pending)} in progress")
 
 
+def other_arguments(spec: RunSpec) -> str | None:
+    """`name (total_timesteps 10 -> 2048)` where the run's last checkpoint holds other training arguments
+    than this grid gives it (a run of another grid, which its training script refuses to continue, and
+    which the sweep must not take for this grid's); None otherwise, or where it has none to read."""
+    latest = runs.latest_checkpoint(spec.run_dir)
+    if latest is None:
+        return None
+    try:
+        recorded = runs.read_checkpoint_file(latest).get("args", {})
+    except ValueError:  # the sweep lists it in skipped.csv
+        return None
+    module = TRAINING_MODULES[paper.action_kind(spec.env_id)]
+    wanted = tyro.cli(module.Args, args=spec.command()[2:])  # the arguments the run's command gives it
+    differing = runs.differing_arguments(recorded, asdict(wanted), asdict(module.Args()))
+    return f"{spec.name} ({', '.join(differing)})" if differing else None
+
+
 def unfinished_note(spec: RunSpec) -> str:
     """`name (last checkpoint's step)`, and who is training it now where its run directory is locked."""
     holder = lock_holder(spec.run_dir)
@@ -351,6 +385,27 @@ def reproduce(args: Args) -> int:
     specs = grid(args)
     results = Path(args.results or f"results/{args.preset}")
     plot_results.check_writable(results)  # before hours of training, not after
+    lock = claim_root(Path(specs[0].root))
+    try:
+        return reproduce_locked(args, specs, results)
+    finally:
+        lock.close()
+
+
+def claim_root(root: Path):
+    """Locks the grid's root for this launcher (files.lock_directory). InputError with one line where
+    it is not a writable directory or another launcher holds it: two launchers would each train, and
+    report as failed, the runs the other is training, and sweep them half-trained."""
+    if root.exists() and not root.is_dir():
+        raise InputError(f"--root {root} exists and is not a directory")
+    check_writable(root)
+    try:
+        return lock_directory(root, "another reproduce.py")
+    except LockedError as e:
+        raise InputError(f"{e}; wait for it to finish or choose another --root") from None
+
+
+def reproduce_locked(args: Args, specs: list[RunSpec], results: Path) -> int:
     todo = [s for s in specs if not s.final_checkpoint.exists()]
     print(grid_state(specs), file=sys.stderr)
     tally = Tally(len(specs), len(specs) - len(todo))
@@ -361,7 +416,11 @@ def reproduce(args: Args) -> int:
             run_submitit(todo, tally, args)
         tally.progress.close()
 
-    swept = [s for s in specs if s.last_step() is not None]
+    stale = {s: note for s in specs if (note := other_arguments(s))}
+    if stale:
+        print(f"note: not swept, trained with other arguments than this grid's: {'; '.join(stale.values())} "
+              "(choose another --root, or delete them)", file=sys.stderr)  # fmt: skip
+    swept = [s for s in specs if s not in stale and s.last_step() is not None]
     if not swept:
         raise InputError("no run has any checkpoint to sweep")
     unfinished = [unfinished_note(s) for s in swept if not s.final_checkpoint.exists()]
@@ -442,18 +501,14 @@ def main() -> None:
                 job.cancel(check=False)
             except Exception:  # noqa: S110  a job that already ended, or a scheduler that is gone
                 pass
+        print(f"interrupted ({signal.Signals(signum).name}): finished runs, checkpoints and sweep cells are kept; "
+              "rerun the same command to continue", file=sys.stderr, flush=True)  # fmt: skip
         os._exit(128 + signum)
 
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
-    try:
+    with one_line_errors():  # files.exit_status's rule; finished runs and cells stay
         failed = reproduce(args)
-    except (InputError, eval_gamma_sweep.InputError, plot_results.InputError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # e.g. a full disk while writing results; finished runs and cells stay
-        print(f"error: {e}", file=sys.stderr)
-        sys.exit(1)
     sys.exit(1 if failed else 0)
 
 

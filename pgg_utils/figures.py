@@ -264,11 +264,12 @@ def legend_right(fig, entries: list, title: str) -> None:
 
 
 def figure_layout(kind: str, envs: list[str]) -> tuple[list[str], int | None]:
-    """The panels of a figure: continuous, the paper's six tasks in 2×3 (and any others after them)."""
-    if kind == "continuous":
-        layout = list(PAPER_ENVS["continuous"]) + [e for e in envs if e not in PAPER_ENVS["continuous"]]
-        return layout, 3
-    return list(envs), None
+    """(panels, columns) of a figure: the tasks swept, never one that was not. Where they are all the
+    paper's, in its order, continuous ones three to a row (its 2×3 grid for its six); else as given."""
+    paper = PAPER_ENVS.get(kind, ())
+    if not all(env in paper for env in envs):
+        return list(envs), None
+    return [env for env in paper if env in envs], min(3, len(envs)) if kind == "continuous" else None
 
 
 def figure_for_variant(
@@ -283,9 +284,9 @@ def figure_for_variant(
 ):
     """The paper's figure: return against training steps per env; PPO solid black (eval γ=1), one
     dashed line per eval γ of `variant` (those in `gammas`, default all), each in its γ's colour and
-    marker and with a small sideways offset. Envs of `layout` without data are empty panels labelled
-    "not run". `title`: the figure's, where it is not the variant's whole figure. `y_limits`: env ->
-    the y-limits of the paper's figure this one stands beside (set_y_range's `fixed`)."""
+    marker and with a small sideways offset. Envs of `layout` without data of `variant` are empty
+    panels labelled "not run". `title`: the figure's, where it is not the variant's whole figure.
+    `y_limits`: env -> the y-limits of the paper's figure this one stands beside (set_y_range's `fixed`)."""
     layout = layout or list(envs)
     cells = cell_index(summary)
     kind = summary[0]["kind"] if summary else "discrete"

@@ -2,6 +2,7 @@
 
 import contextlib
 import csv
+import errno
 import fcntl
 import io
 import os
@@ -13,19 +14,43 @@ class InputError(Exception):
     """Bad input: reported as one line, exit status 2."""
 
 
+class RuntimeFailure(Exception):
+    """Work that failed while it ran (a killed worker, a failed run): reported as one line, exit status 1."""
+
+
+# A file operation that fails with one of these failed at run time (exit 1); any other OSError is a
+# file or folder that cannot be used as given (no permission, not a directory: bad input, exit 2).
+RUN_TIME_ERRNOS = frozenset({errno.ENOSPC, errno.EDQUOT, errno.EIO, errno.EFBIG})
+
+
+def exit_status(error: BaseException) -> int:
+    """Every script's rule: 2 for bad input, 1 for a failure at run time, 130 for Ctrl-C."""
+    if isinstance(error, KeyboardInterrupt):
+        return 130
+    if isinstance(error, RuntimeFailure) or (isinstance(error, OSError) and error.errno in RUN_TIME_ERRNOS):
+        return 1
+    return 2
+
+
+def os_error_line(e: OSError) -> str:
+    """An OSError in one line naming its file: write_atomic's name it in the message, others in `filename`."""
+    named = e.filename and not (e.strerror or "").startswith("cannot")
+    return f"{e.filename}: {e.strerror}" if named else str(e.strerror or e)
+
+
 @contextlib.contextmanager
-def one_line_errors(os_error_status: int = 2):
-    """A command's failures as one line on stderr, never a traceback: bad input (InputError) exits 2,
-    a failed file operation (OSError: a full disk, an unwritable folder) `os_error_status`."""
+def one_line_errors():
+    """A command's failures as one line on stderr, never a traceback, with exit_status's code: bad
+    input (InputError, a file or folder that cannot be used), a failure at run time (RuntimeFailure,
+    a full disk)."""
     try:
         yield
-    except InputError as e:
+    except (InputError, RuntimeFailure) as e:
         print(f"error: {e}", file=sys.stderr)
-        sys.exit(2)
-    except OSError as e:  # write_atomic's errors name their file in the message, others in `filename`
-        named = e.filename and not (e.strerror or "").startswith("cannot")
-        print(f"error: {f'{e.filename}: {e.strerror}' if named else e.strerror or e}", file=sys.stderr)
-        sys.exit(os_error_status)
+        sys.exit(exit_status(e))
+    except OSError as e:
+        print(f"error: {os_error_line(e)}", file=sys.stderr)
+        sys.exit(exit_status(e))
 
 
 @contextlib.contextmanager
@@ -113,7 +138,8 @@ def lock_holder(directory: Path) -> str | None:
 
 def check_writable(*directories: Path) -> None:
     """Creates each directory and proves it writable (a file created and removed: os.replace needs
-    that), before any work whose results would go there. InputError with one line otherwise."""
+    that), before any work whose results would go there. InputError with one line otherwise, or an
+    OSError where the disk is full (exit_status)."""
     for directory in map(Path, directories):
         try:
             directory.mkdir(parents=True, exist_ok=True)
@@ -121,6 +147,8 @@ def check_writable(*directories: Path) -> None:
             probe.write_bytes(b"")
             probe.unlink()
         except OSError as e:
+            if e.errno in RUN_TIME_ERRNOS:  # a full disk is no fault of the input
+                raise OSError(e.errno, f"cannot write to {directory}: {e.strerror or e}") from None
             raise InputError(f"cannot write to {directory}: {e.strerror or e}") from None
 
 

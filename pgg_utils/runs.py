@@ -9,6 +9,7 @@ import io
 import json
 import math
 import os
+import pickle
 import platform
 import random
 import shutil
@@ -26,7 +27,7 @@ import numpy as np
 import torch
 
 from pgg_utils.arguments import ARGUMENT_RULES, run_name_error, training_arguments
-from pgg_utils.files import InputError, LockedError, lock_directory, write_atomic
+from pgg_utils.files import InputError, LockedError, exit_status, lock_directory, write_atomic
 from pgg_utils.guidance import schedule_error
 from pgg_utils.identity import run_name
 from pgg_utils.progress import Progress
@@ -73,11 +74,17 @@ def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=Non
             return "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); with a newer mujoco use Pusher-v5"
         return f"cannot make environment {env_id!r}: {e}"
     except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
-        return f"cannot make environment {env_id!r}: {e}"
+        backend = os.environ.get("MUJOCO_GL")
+        hint = (f" (MUJOCO_GL={backend}: is its library installed? osmesa needs apt-get install libosmesa6, egl "
+                "libegl1)" if backend and capture_video else "")  # fmt: skip
+        return f"cannot make environment {env_id!r}: {e}{hint}"
     action_space, observation_space = env.action_space, env.observation_space
     error = video_error(env) if capture_video else None
     env.close()
     wanted, other = (gym.spaces.Discrete, "continuous") if kind == "discrete" else (gym.spaces.Box, "discrete")
+    if not isinstance(action_space, (gym.spaces.Discrete, gym.spaces.Box)):
+        return (f"{env_id} has a {type(action_space).__name__} action space; neither script trains it "
+                "(ppo_pgg_discrete.py: Discrete, ppo_pgg_continuous.py: Box)")  # fmt: skip
     if not isinstance(action_space, wanted):
         return (f"{env_id} has a {type(action_space).__name__} action space; this script needs "
                 f"{wanted.__name__} (use ppo_pgg_{other}.py)")  # fmt: skip
@@ -244,6 +251,10 @@ def read_checkpoint_file(path: Path) -> dict:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # a truncated or foreign file raises anything from pickle/zip internals
+        if isinstance(e, pickle.UnpicklingError) and "allowed global" in str(e):
+            # torch's message advises weights_only=False: running the file's code
+            raise ValueError("not a PGG checkpoint (it holds Python objects beyond tensors and plain values, "
+                             "which these scripts never write and a pickle-free load refuses)") from None  # fmt: skip
         first_line = str(e).splitlines()[0] if str(e) else ""
         raise ValueError(f"unreadable checkpoint ({type(e).__name__}: {first_line})") from None
     if not isinstance(ckpt, dict) or "model" not in ckpt:
@@ -415,6 +426,13 @@ class NonFiniteError(Exception):
     """Training produced a NaN or an infinity; the message is one line naming the iteration."""
 
 
+def differing_arguments(recorded: dict, wanted: dict, defaults: dict) -> list[str]:
+    """`name recorded -> wanted` for each training argument in which a run's checkpoint differs from the
+    arguments it is asked to continue with: the runs a training script refuses to continue."""
+    recorded, wanted = training_arguments(recorded, defaults), training_arguments(wanted, defaults)
+    return [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]
+
+
 class Run:
     """One training run's directory, locked while this process trains there, and its checkpoints.
 
@@ -503,11 +521,7 @@ class Run:
         if bad := non_finite(ckpt["model"]):
             raise RunDirError(f"{latest} holds non-finite weights ({', '.join(bad[:3])}): the run diverged, and continuing "
                               "it would diverge again; choose another --run-name, or pass --overwrite")  # fmt: skip
-        recorded = training_arguments(ckpt.get("args", {}), self.defaults())
-        wanted = training_arguments(asdict(args), self.defaults())
-        differing = [
-            f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]
-        ]
+        differing = differing_arguments(ckpt.get("args", {}), asdict(args), self.defaults())
         if differing:
             raise RunDirError(
                 f"{self.dir} holds a run with other arguments ({', '.join(differing)}): "
@@ -681,20 +695,27 @@ def train_in_process(script, args) -> Path:
 def launch(args, kind: str, script: str, train) -> None:
     """A training script's `main` after parsing: checks every argument before the disk is touched,
     prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
-    exit 2 for bad arguments or a run directory that must not be used or cannot be written, 130 for
-    Ctrl-C, 1 for a full disk during training or a non-finite run (its earlier checkpoints kept)."""
-    error = argument_error(args, kind)
+    files.exit_status's rule: exit 2 for bad arguments or a run directory that must not be used or
+    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts) or a non-finite run
+    (its earlier checkpoints kept)."""
+    error, status = argument_error(args, kind), 2
     run = None
     if error is None:
         try:
             run = Run.prepare(args, kind, Path(script))
         except RunDirError as e:
             error = str(e)
-        except OSError as e:
-            error = f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
+        except OSError as e:  # write_atomic's name the file; a full disk is exit 1, a folder we may not write 2
+            written = e.strerror and e.strerror.startswith("cannot write")
+            error = (
+                e.strerror
+                if written
+                else f"cannot write the run directory under {args.output_dir!r}: {e.strerror or e}"
+            )
+            status = exit_status(e)
     if error is not None:
         print(f"error: {error}", file=sys.stderr)
-        sys.exit(2)
+        sys.exit(status)
     for note in run.notes:
         print(f"note: {note}", file=sys.stderr)
     print(f"run directory: {run.dir}")
@@ -713,9 +734,10 @@ def launch(args, kind: str, script: str, train) -> None:
             print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
             sys.exit(130)
         message = str(e)
-        if isinstance(e, OSError):  # write_atomic's name the file; TensorBoard's name nothing
+        if isinstance(e, OSError):  # write_atomic's name the file; TensorBoard's name nothing: its newest events file
             written = e.strerror and e.strerror.startswith("cannot write")
-            message = e.strerror if written else f"cannot write in {run.dir}: {e.strerror or e}"
+            events = sorted(run.dir.glob("events.out.tfevents.*"), key=lambda path: path.stat().st_mtime)
+            message = e.strerror if written else f"cannot write {events[-1] if events else run.dir}: {e.strerror or e}"
             message += f"; checkpoints up to {latest.name} are kept" if latest else ""
         print(f"error: {message}", file=sys.stderr)
         sys.exit(1)

@@ -471,7 +471,7 @@ def test_an_eta_reads_in_minutes_and_seconds():
     assert [progress.format_duration(s) for s in (100, 3599, 3600, 7325)] == ["1m40s", "59m59s", "1h00m", "2h02m"]
 
 
-def test_a_full_disk_under_tensorboard_is_one_line_naming_the_run_directory(tmp_path, monkeypatch, capsys):
+def test_a_full_disk_under_tensorboard_is_one_line_naming_the_events_file(tmp_path, monkeypatch, capsys):
     from tensorboard.summary.writer import record_writer
 
     real_write, writes = record_writer.RecordWriter.write, []
@@ -486,7 +486,8 @@ def test_a_full_disk_under_tensorboard_is_one_line_naming_the_run_directory(tmp_
     args = small_args("discrete", tmp_path)
     code, error = launch(ppo_pgg_discrete, args, capsys)
     assert code == 1 and len(error) == 1, error
-    assert error[0] == f"error: cannot write in {tmp_path / identity.run_name(args)}: No space left on device"
+    (events,) = (tmp_path / identity.run_name(args)).glob("events.out.tfevents.*")
+    assert error[0] == f"error: cannot write {events}: No space left on device"
 
 
 def test_a_refused_resume_sets_nothing_aside(tmp_path):

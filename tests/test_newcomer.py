@@ -1,0 +1,265 @@
+"""What a newcomer broke (issue 37): a killed sweep worker, tasks outside the paper, runs of another grid,
+two launchers on one root, a hand-edited episodes.csv, the exit-code rule and the one-line errors."""
+
+import argparse
+import ctypes.util
+import errno
+import os
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from conftest import ROOT, one_line_error, run_script
+from test_plots import episode_rows, run_cli, write_episodes
+
+import eval_gamma_sweep as sweep
+import plot_results
+import ppo_pgg_discrete
+import reproduce
+from pgg_utils import files, runs
+from pgg_utils.files import lock_directory
+
+FIXTURES = Path(__file__).resolve().parent / "fixtures"
+FORMAT_2 = FIXTURES / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
+
+
+def error_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("error:")]
+
+
+# --- 1. a SIGKILLed sweep worker ------------------------------------------------------------------------
+
+# The sweep's command, with its worker SIGKILLing itself when it takes up the γ = 5 cell (as the OOM
+# killer would kill it): no hang, one line, exit 1, the other cells kept.
+DYING_WORKER = """
+import os, signal, sys
+import eval_gamma_sweep as sweep
+real_run_job = sweep.run_job
+def killed_at_gamma_5(job):
+    if job.gamma == 5.0:
+        os.kill(os.getpid(), signal.SIGKILL)
+    return real_run_job(job)
+sweep.run_job = killed_at_gamma_5
+sys.argv = ["eval_gamma_sweep.py", *sys.argv[1:]]
+sweep.main()
+"""
+
+
+def test_a_sigkilled_worker_ends_the_sweep_with_one_line_and_a_rerun_completes_it(tmp_path):
+    flags = [str(FORMAT_2), "--gammas", "1", "2", "5", "10", "--episodes", "4", "--workers", "2"]
+    start = time.time()
+    killed = subprocess.run([sys.executable, "-c", DYING_WORKER, *flags, "--output", str(tmp_path / "out")],
+                            capture_output=True, text=True, cwd=ROOT, timeout=60)  # fmt: skip
+    assert time.time() - start < 60
+    (line,) = error_lines(killed.stderr)
+    assert killed.returncode == 1 and "Traceback" not in killed.stderr, killed.stderr
+    assert "a sweep worker died (pid " in line and "was killed by SIGKILL" in line, line
+    kept = len(list((tmp_path / "out" / "cells").glob("*.csv")))  # the other worker's cell in flight may be lost
+    assert 1 <= kept <= 3 and f"{kept} of the sweep's 4 cells are finished" in line, line
+    assert "rerun the same command" in line, line
+    rerun = subprocess.run([sys.executable, str(ROOT / "eval_gamma_sweep.py"), *flags, "--output", str(tmp_path / "out")],
+                           capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"4 cells, {kept} already done" in rerun.stderr
+    clean = sweep.sweep(sweep.Args(paths=(str(FORMAT_2),), output=str(tmp_path / "clean"), gammas=(1.0, 2.0, 5.0, 10.0),
+                                   episodes=4))  # fmt: skip
+    for name in ("episodes.csv", "summary.csv"):
+        assert (tmp_path / "out" / name).read_text() == (clean / name).read_text()
+
+
+# --- 2. tasks the paper did not run ---------------------------------------------------------------------
+
+
+def tiny_grid(tmp_path, name: str, **overrides) -> reproduce.Args:
+    args = reproduce.Args(preset="quick", total_timesteps=1024, checkpoint_interval=512, seeds=1, variants=("ppo",),
+                          gammas=(1.0, 2.0), episodes=2, workers=1, root=str(tmp_path / "runs"),
+                          results=str(tmp_path / name))  # fmt: skip
+    return replace(args, **overrides)
+
+
+def test_reproduce_on_a_task_outside_the_paper_ends_with_its_tables_and_agents(tmp_path, capsys):
+    assert reproduce.reproduce(tiny_grid(tmp_path, "results", envs=("MountainCar-v0",))) == 0
+    results = tmp_path / "results"
+    assert "| Method | MountainCar-v0 |" in (results / "table_discrete.md").read_text()
+    assert "| MountainCar-v0__ppo__s1 | MountainCar-v0 | ppo | 1 |" in (results / "agents" / "README.md").read_text()
+    assert not (results / "compare_paper.md").exists()
+    err = capsys.readouterr().err
+    assert "none of the swept envs (MountainCar-v0) is in the paper's tables" in err and "results in" in err
+
+
+def test_compare_paper_on_tasks_outside_the_paper_is_a_note_and_exit_0(tmp_path):
+    target = tmp_path / "episodes.csv"  # not in the paper, and not a gymnasium task: its rows say how it acts
+    write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}, action_space="discrete"))
+    done = run_cli(target, "--output", tmp_path / "out", "--compare-paper")
+    assert done.returncode == 0 and not error_lines(done.stderr), done.stderr
+    assert "note: none of the swept envs (MyEnv-v0) is in the paper's tables" in done.stderr
+    assert (tmp_path / "out" / "table_discrete.md").exists() and not (tmp_path / "out" / "compare_paper.md").exists()
+
+
+# --- 3. runs of another grid ----------------------------------------------------------------------------
+
+
+def test_runs_trained_with_other_arguments_are_refused_and_never_swept(tmp_path, capsys):
+    assert reproduce.reproduce(tiny_grid(tmp_path, "first")) == 0  # s1, 1,024 steps
+    second = tiny_grid(tmp_path, "second", seeds=2, total_timesteps=2048, checkpoint_interval=1024)
+    assert reproduce.reproduce(second) == 1  # s1 is refused ("other arguments"), s2 trains
+    err = capsys.readouterr().err
+    assert "FAILED CartPole-v1__ppo__s1" in err
+    assert (
+        "not swept, trained with other arguments than this grid's: CartPole-v1__ppo__s1 (total_timesteps 1024 -> 2048)"
+        in err
+    )
+    swept = {line.split(",")[3] for line in (tmp_path / "second" / "episodes.csv").read_text().splitlines()[1:]}
+    assert swept == {"CartPole-v1__ppo__s2"}
+    assert "**1k Steps**" in (tmp_path / "second" / "table_discrete.md").read_text()
+
+
+# --- 4. two launchers on one root -----------------------------------------------------------------------
+
+QUICK = ["--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--checkpoint-interval", "512",
+         "--gammas", "1", "--episodes", "2", "--workers", "1"]  # fmt: skip
+
+
+def test_a_second_launcher_on_a_root_in_use_is_refused_in_one_line(tmp_path):
+    root = tmp_path / "runs"
+    root.mkdir()
+    first = lock_directory(root, "another reproduce.py")  # as the first launcher holds it, training
+    try:
+        second = run_script("reproduce.py", *QUICK, "--root", str(root), "--results", str(tmp_path / "results"))
+    finally:
+        first.close()
+    line = one_line_error(second)
+    assert line == (f"error: {root} is in use by another reproduce.py (pid {os.getpid()}); wait for it to finish or "
+                    "choose another --root")  # fmt: skip
+    assert [p.name for p in root.iterdir()] == [".lock"]  # nothing trained
+
+
+# --- 5. a hand-edited episodes.csv ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("value,message", [
+    ("abc", "return 'abc' is not a number"),
+    ("nan", "return 'nan' is not finite"),
+    ("inf", "return 'inf' is not finite"),
+    ("99999", "return 99999 is outside what CartPole-v1 allows, [0, 500]"),
+    ("-1", "return -1 is outside what CartPole-v1 allows, [0, 500]"),
+])  # fmt: skip
+def test_an_edited_return_is_one_line_naming_the_line_and_exit_2(tmp_path, value, message):
+    rows = episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [100.0, 200.0, 300.0]})
+    rows[3]["return"] = value
+    write_episodes(tmp_path / "episodes.csv", rows)
+    done = run_cli(tmp_path / "episodes.csv", "--output", tmp_path / "out")
+    assert one_line_error(done) == f"error: {tmp_path / 'episodes.csv'}, line 5: {message}"
+    assert not (tmp_path / "out" / "table_discrete.md").exists()
+
+
+def test_an_edited_step_is_one_line(tmp_path):
+    rows = episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [100.0, 200.0]})
+    rows[0]["step"] = "1e3"
+    write_episodes(tmp_path / "episodes.csv", rows)
+    done = run_cli(tmp_path / "episodes.csv", "--output", tmp_path / "out")
+    assert one_line_error(done) == f"error: {tmp_path / 'episodes.csv'}, line 2: step '1e3' is not an integer"
+
+
+# --- 6. one exit-code rule: 2 bad input, 1 failed at run time, 130 Ctrl-C --------------------------------
+
+
+def full_disk_main(script: str, tmp_path: Path) -> tuple[str, list]:
+    """A script's main, argv and the output it should name, for a disk that is full from the start."""
+    sweep_csv = tmp_path / "sweep" / "episodes.csv"
+    write_episodes(sweep_csv, episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [100.0, 200.0]}))
+    return {
+        "ppo_pgg_discrete.py": (ppo_pgg_discrete.main, ["--total-timesteps", "512", "--num-steps", "128",
+                                                        "--checkpoint-interval", "512", "--output-dir", str(tmp_path / "runs"),
+                                                        "--run-name", "full"], tmp_path / "runs" / "full" / "args.json"),
+        "eval_gamma_sweep.py": (sweep.main, [str(FORMAT_2), "--gammas", "1", "--episodes", "2", "--output",
+                                             str(tmp_path / "out")], tmp_path / "out" / "cells"),
+        "plot_results.py": (plot_results.main, [str(sweep_csv), "--output", str(tmp_path / "out")], tmp_path / "out"),
+    }[script]  # fmt: skip
+
+
+@pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py"])
+def test_a_full_disk_is_exit_1_naming_the_file_in_every_script(tmp_path, monkeypatch, capsys, script):
+    def rename_on_a_full_disk(source, target):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    main, argv, named = full_disk_main(script, tmp_path)
+    monkeypatch.setattr(files.os, "replace", rename_on_a_full_disk)
+    monkeypatch.setattr(sys, "argv", [script, *argv])
+    with pytest.raises(SystemExit) as exit_info:
+        main()
+    errors = error_lines(capsys.readouterr().err)
+    assert exit_info.value.code == 1 and len(errors) == 1, errors
+    assert errors[0].startswith(f"error: cannot write {named}") and errors[0].endswith("No space left on device"), (
+        errors
+    )
+
+
+@pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py", "reproduce.py"])
+def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
+    taken = tmp_path / "taken"
+    taken.write_text("")
+    flags = {"ppo_pgg_discrete.py": ["--output-dir", str(taken)],
+             "eval_gamma_sweep.py": [str(FORMAT_2), "--output", str(taken)],
+             "plot_results.py": [str(FORMAT_2.parent), "--output", str(taken)],
+             "reproduce.py": [*QUICK, "--root", str(taken)]}[script]  # fmt: skip
+    if script == "plot_results.py":
+        write_episodes(
+            tmp_path / "sweep" / "episodes.csv", episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [1.0, 2.0]})
+        )
+        flags[0] = str(tmp_path / "sweep")
+    line = one_line_error(run_script(script, *flags))
+    assert str(taken) in line, line
+
+
+# --- 7. one line of error where the scripts write the error ----------------------------------------------
+
+
+@pytest.mark.skipif(shutil.which("srun") is not None, reason="Slurm is installed here")
+def test_slurm_without_slurm_is_one_line_before_anything_is_trained(tmp_path):
+    done = run_script("reproduce.py", *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
+    assert "--executor slurm needs Slurm (srun and sbatch on PATH)" in one_line_error(done)
+    assert not (tmp_path / "runs").exists()
+
+
+class MultiDiscreteEnv(gym.Env):
+    observation_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+    action_space = gym.spaces.MultiDiscrete([2, 3])
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_an_action_space_neither_script_trains_gets_no_circular_advice(kind):
+    gym.register("NewcomerMultiDiscrete-v0", entry_point=MultiDiscreteEnv)
+    try:
+        error = runs.env_error("NewcomerMultiDiscrete-v0", kind)
+    finally:
+        del gym.registry["NewcomerMultiDiscrete-v0"]
+    assert error == ("NewcomerMultiDiscrete-v0 has a MultiDiscrete action space; neither script trains it "
+                     "(ppo_pgg_discrete.py: Discrete, ppo_pgg_continuous.py: Box)")  # fmt: skip
+
+
+def test_a_file_of_python_objects_is_refused_without_torchs_advice_to_unpickle_it(tmp_path):
+    foreign = tmp_path / "run" / "checkpoints" / "step_000000512.pt"
+    foreign.parent.mkdir(parents=True)
+    torch.save({"model": argparse.Namespace()}, foreign)
+    done = run_script("eval_gamma_sweep.py", str(foreign), "--video", str(tmp_path / "videos"))
+    line = one_line_error(done)
+    assert "not a PGG checkpoint (it holds Python objects" in line and "weights_only" not in line, line
+
+
+@pytest.mark.skipif(ctypes.util.find_library("OSMesa") is not None, reason="OSMesa is installed here")
+def test_osmesa_without_its_library_names_the_package(tmp_path):
+    env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
+    done = run_script("ppo_pgg_continuous.py", "--env-id", "Hopper-v4", "--capture-video", "--output-dir",
+                      str(tmp_path), env=env)  # fmt: skip
+    assert "osmesa needs apt-get install libosmesa6" in one_line_error(done)
