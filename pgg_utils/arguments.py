@@ -65,11 +65,14 @@ def guidance_error(value: float, flag: str = "--guidance") -> str | None:
 
 
 def run_name_error(name: str | None) -> str | None:
-    """A run name is one path component: it cannot leave --output-dir or name it."""
+    """A run name is one path component: it cannot leave --output-dir or name it, and it is printable
+    with no space at either end (a blank or a newline would make a directory no one can type)."""
     if name is None:
         return None
-    if not name or name in (".", "..") or "/" in name or "\\" in name or "\0" in name:
-        return f"--run-name must be one path component (no '/', not '.' or '..'), got {name!r}"
+    if not name.strip() or name in (".", "..") or "/" in name or "\\" in name or name != name.strip():
+        return f"--run-name must be one path component (no '/', not '.' or '..', no space at an end), got {name!r}"
+    if not name.isprintable():
+        return f"--run-name must be printable (no newline or control character), got {name!r}"
     return None
 
 

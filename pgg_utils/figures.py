@@ -110,6 +110,8 @@ def style_axis(ax, title: str, xlabel: str, ylabel: str, steps_on_x: bool) -> No
     ax.set_ylabel(ylabel, fontsize=LABEL_SIZE)
     ax.tick_params(labelsize=TICK_SIZE)
     ax.grid(alpha=0.3)
+    if isinstance(ax.yaxis.get_major_formatter(), matplotlib.ticker.ScalarFormatter):
+        ax.yaxis.get_major_formatter().set_useOffset(False)  # a flat line reads 500, not 0 + 5e2
     if steps_on_x:
         ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
 

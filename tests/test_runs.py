@@ -447,10 +447,10 @@ def test_resuming_a_finished_run_touches_none_of_its_files(tmp_path):
     assert {path: path.read_bytes() for path in before} == before
 
 
-@pytest.mark.parametrize("name", ["../escape", "/tmp/absolute", ".", "..", "a/b", ""])
+@pytest.mark.parametrize("name", ["../escape", "/tmp/absolute", ".", "..", "a/b", "", " ", "run ", "a\nb"])
 def test_a_run_name_is_one_path_component(name, tmp_path):
     line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path / "runs"), "--run-name", name))
-    assert "--run-name must be one path component" in line
+    assert "--run-name must be one path component" in line or "--run-name must be printable" in line
     assert not list(tmp_path.iterdir()) and not Path("/tmp/absolute").exists()
 
 
