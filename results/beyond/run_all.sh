@@ -25,7 +25,7 @@ report() {
     python benchmarks/beyond_report.py results/beyond --table results/continuous/episodes.csv
 }
 beyond Hopper-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
+beyond Pusher-v4 pgg_g1.1_goal && goal_distance && report
 beyond Reacher-v4 ppo pgg_g1.1 pgg_g1.1_goal && goal_distance && report
 beyond Walker2d-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
-beyond Pusher-v4 pgg_g1.1_goal && goal_distance && report
 beyond Humanoid-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
