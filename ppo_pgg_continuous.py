@@ -17,6 +17,8 @@ management (run directories, checkpoints, resume, progress) is in `pgg_utils.run
 
     python ppo_pgg_continuous.py --env-id Hopper-v4 --guidance 1.1
     python ppo_pgg_continuous.py --env-id Hopper-v4 --guidance 1.1 --resume   # continue a stopped run
+    python ppo_pgg_continuous.py --env-id Hopper-v4 --guidance 1 --guidance-schedule linear --guidance-final 1.2
+    python ppo_pgg_continuous.py --env-id Reacher-v4 --guidance 1.1 --null-dims 4 5 8 9 10   # guidance on the goal
 """
 
 import math

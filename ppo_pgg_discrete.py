@@ -17,6 +17,7 @@ progress) is in `pgg_utils.runs`.
 
     python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1
     python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1 --resume   # continue a stopped run
+    python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1 --guidance-schedule adaptive --guidance-kl-target 0.01
 """
 
 from collections import defaultdict
