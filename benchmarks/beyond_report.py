@@ -15,7 +15,10 @@ folder, atomically:
                the γ-response at the last step, and the final distance to the goal against γ
   report.csv   one row per (task, variant, baseline, step) at γ = 1: the tests' numbers
   gamma_response.png   return against eval γ at the last step, a panel per task
-A run "collapses" where its γ = 1 return at the last step is below half of its best mark's.
+  guidance_trajectory.png   γ_train over training of the scheduled and adaptive runs
+With `--runs runs/beyond` it first rewrites `guidance_trajectory.csv` (γ_train and the KL of every
+iteration of every run, from the runs' TensorBoard events, which are not committed); without it the
+committed CSV is read. A run "collapses" where its γ = 1 return at the last step is below half of its best mark's.
 """
 
 import csv
@@ -46,6 +49,44 @@ class Args:
     """results/beyond: one folder per task, each with the episodes.csv of its sweep"""
     table: str = "results/continuous/episodes.csv"
     """the continuous table's episodes, for the baselines of the paper's tasks"""
+    runs: str | None = None
+    """the runs' folder, to rewrite guidance_trajectory.csv from their TensorBoard events; None: read the CSV"""
+
+
+TRAJECTORY_COLUMNS = ["env_id", "variant", "seed", "step", "guidance", "kl"]
+
+
+def write_trajectories(runs_folder: Path, output: Path) -> None:
+    """γ_train and KL(π̂ ‖ π(·|s)) of every iteration of every scheduled or adaptive run under `runs_folder`."""
+    import json
+
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    from pgg_utils.identity import variant_id
+
+    rows = []
+    for args_file in sorted(runs_folder.glob("*/args.json")):
+        args = json.loads(args_file.read_text())
+        if args.get("guidance_schedule", "constant") == "constant":
+            continue
+        events = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
+        events.Reload()
+        kls = {e.step: e.value for e in events.Scalars("pgg/kl_guided_vs_conditional")}
+        rows += [{"env_id": args["env_id"], "variant": variant_id(args), "seed": args["seed"], "step": e.step,
+                  "guidance": e.value, "kl": kls.get(e.step)} for e in events.Scalars("pgg/guidance")]  # fmt: skip
+    write_csv_atomic(output, TRAJECTORY_COLUMNS, rows)
+
+
+def read_trajectories(folder: Path) -> dict:
+    """{(env, variant): {seed: [(step, γ_train, kl)]}} from guidance_trajectory.csv, where it exists."""
+    path, out = folder / "guidance_trajectory.csv", defaultdict(lambda: defaultdict(list))
+    if path.exists():
+        with open(path, newline="") as f:
+            for r in csv.DictReader(f):
+                out[(r["env_id"], r["variant"])][int(r["seed"])].append(
+                    (int(r["step"]), float(r["guidance"]), float(r["kl"]))
+                )
+    return out
 
 
 def read_rows(path: Path) -> list[dict]:
@@ -145,9 +186,25 @@ def pct(x: float) -> str:
 
 
 def task_section(env: str, means: dict, variants: list[str], rows: list[dict], pooled: dict, heldout: dict,
-                 distance: dict) -> list[str]:  # fmt: skip
+                 distance: dict, trajectories: dict) -> list[str]:  # fmt: skip
     lines = [f"## {env}", ""]
     steps = sorted({s for (e, v, s, g) in means if e == env})
+    scheduled = [v for v in variants if trajectories.get((env, v))]
+    if scheduled:
+        lines += [("γ_train of the last iteration before each mark (mean over seeds, min–max): where the schedule had "
+                  "taken the guidance."), "", "| variant | " + " | ".join(step_label(s) for s in steps) + " |",
+                  "|---|" + "---|" * len(steps)]  # fmt: skip
+        for variant in scheduled:
+            cells = []
+            for step in steps:
+                last = [
+                    max((t for t in runs if t[0] <= step), default=None)
+                    for runs in trajectories[(env, variant)].values()
+                ]
+                values = [t[1] for t in last if t is not None]
+                cells.append(f"{np.mean(values):.3f} ({min(values):.3f}–{max(values):.3f})" if values else "–")
+            lines.append(f"| {paper_name(variant)} | " + " | ".join(cells) + " |")
+        lines.append("")
     lines += [("Return at γ = 1, mean ± 95% CI over seeds (seed sd); runs that collapse (γ = 1 return at the last "
               "step below half their best mark's) named by seed."), "",
               "| variant | " + " | ".join(step_label(s) for s in steps) + " | collapsed |",
@@ -246,6 +303,30 @@ def gamma_response_figure(means: dict, envs: list[str], variants_of: dict, path:
     plt.close(fig)
 
 
+def trajectory_figure(trajectories: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pgg_utils.figures import steps_formatter, variant_colour
+
+    keys = sorted(trajectories)
+    fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.2), squeeze=False)
+    for ax, (env, variant) in zip(axes[0], keys):
+        for seed, points in sorted(trajectories[(env, variant)].items()):
+            steps, gammas, _ = zip(*sorted(points))
+            ax.plot(steps, gammas, color=variant_colour(variant), alpha=0.7, lw=1, label=f"seed {seed}")
+        ax.set_title(f"{env}\n{paper_name(variant)}", fontsize=9)
+        ax.set_xlabel("training steps")
+        ax.set_ylabel("γ_train")
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def report(args: Args) -> list[Path]:
     folder = Path(args.folder)
     task_files = sorted(folder.glob("*/episodes.csv"))
@@ -273,15 +354,20 @@ def report(args: Args) -> list[Path]:
                 rows.extend(found)
     for r, p in zip(rows, holm([r["p"] for r in rows])):
         r["p_holm"] = p
-    heldout, distance = read_heldout(folder), read_goal_distance(folder)
+    if args.runs is not None:
+        write_trajectories(Path(args.runs), folder / "guidance_trajectory.csv")
+    heldout, distance, trajectories = read_heldout(folder), read_goal_distance(folder), read_trajectories(folder)
     lines = ["# Beyond the paper: the report", "",
              (f"Generated by `python benchmarks/beyond_report.py {args.folder} --table {args.table}` from the committed "
              "episode CSVs. Baselines of the paper's tasks come from the continuous table's runs (the same code "
              "class: the same algorithm trained with --compile, MuJoCo 2.3.7, on another CPU); Reacher-v4's are "
              "trained here."), ""]  # fmt: skip
     for env in envs:
-        lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance)
+        lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories)
     written = [folder / "report.md", folder / "report.csv", folder / "gamma_response.png"]
+    if trajectories:
+        written.append(folder / "guidance_trajectory.png")
+        trajectory_figure(trajectories, written[-1])
     write_atomic(written[0], "\n".join(lines))
     write_csv_atomic(written[1], REPORT_COLUMNS, rows)
     gamma_response_figure(means, envs, variants_of, written[2])

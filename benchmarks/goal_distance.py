@@ -65,8 +65,12 @@ def final_distances(policy, ckpt: dict, gamma: float, episodes: int, eval_seed: 
 def main() -> None:
     args = tyro.cli(Args, description=__doc__)
     with one_line_errors():
-        rows = []
-        for path in runs.find_checkpoints(args.paths, args.steps):
+        rows, present = [], [p for p in args.paths if Path(p).exists()]
+        for missing in sorted(set(args.paths) - set(present)):  # a goal set not trained yet
+            print(f"note: {missing} does not exist; left out", file=sys.stderr)
+        if not present:
+            raise InputError(f"none of {', '.join(args.paths)} exists")
+        for path in runs.find_checkpoints(present, args.steps):
             agent, ckpt = sweep.load_any_checkpoint(path)
             if ckpt["env_id"] not in args.envs:
                 continue
