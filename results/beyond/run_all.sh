@@ -22,7 +22,7 @@ goal_distance() {
         results/continuous/agents --steps 1000000 --output results/beyond/goal_distance.csv
 }
 report() {
-    python benchmarks/beyond_report.py results/beyond --table results/continuous/episodes.csv
+    python benchmarks/beyond_report.py results/beyond --table results/continuous/episodes.csv --runs runs/beyond
 }
 beyond Hopper-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
 beyond Pusher-v4 pgg_g1.1_goal && goal_distance && report
