@@ -16,6 +16,7 @@ folder, atomically:
   report.csv   one row per (task, variant, baseline, step) at γ = 1: the tests' numbers
   gamma_response.png   return against eval γ at the last step, a panel per task
   guidance_trajectory.png   γ_train over training of the scheduled and adaptive runs
+  goal_distance.png    the final distance to the goal against eval γ, a panel per goal task
 With `--runs runs/beyond` it first rewrites `guidance_trajectory.csv` (γ_train and the KL of every
 iteration of every run, from the runs' TensorBoard events, which are not committed); without it the
 committed CSV is read. A run "collapses" where its γ = 1 return at the last step is below half of its best mark's.
@@ -335,6 +336,33 @@ def trajectory_figure(trajectories: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def distance_figure(distance: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pgg_utils.figures import variant_colour
+
+    envs = sorted({e for (e, v, g) in distance})
+    fig, axes = plt.subplots(1, len(envs), figsize=(4.4 * len(envs), 3.4), squeeze=False)
+    for ax, env in zip(axes[0], envs):
+        for variant in sorted({v for (e, v, g) in distance if e == env}, key=lambda v: (variant_rank(v), v)):
+            gammas = sorted(g for (e, v, g) in distance if e == env and v == variant)
+            stats = [mean_ci95(distance[(env, variant, g)]) for g in gammas]
+            m, h = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
+            color = variant_colour(variant)
+            ax.plot(gammas, m, marker="o", ms=3, color=color, label=paper_name(variant))
+            ax.fill_between(gammas, m - h, m + h, color=color, alpha=0.15)
+        ax.set_title(f"{env}: final distance to the goal", fontsize=10)
+        ax.set_xlabel("eval guidance γ")
+        ax.set_ylabel("distance (lower is closer)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def report(args: Args) -> list[Path]:
     folder = Path(args.folder)
     task_files = sorted(folder.glob("*/episodes.csv"))
@@ -380,6 +408,9 @@ def report(args: Args) -> list[Path]:
     if trajectories:
         written.append(folder / "guidance_trajectory.png")
         trajectory_figure(trajectories, written[-1])
+    if distance:
+        written.append(folder / "goal_distance.png")
+        distance_figure(distance, written[-1])
     write_atomic(written[0], "\n".join(lines))
     write_csv_atomic(written[1], REPORT_COLUMNS, rows)
     gamma_response_figure(means, envs, variants_of, written[2])

@@ -203,3 +203,64 @@ def test_same_episodes_finds_a_return_one_ulp_off_a_missing_episode_and_skips_un
     bad = subprocess.run([sys.executable, script, str(tmp_path / "table.csv"), str(tmp_path / "foreign.csv")],
                          capture_output=True, text=True)  # fmt: skip
     assert bad.returncode == 2 and bad.stderr.startswith("error: ") and bad.stderr.count("\n") == 1
+
+
+def beyond_rows(env, variant, returns_by_step, gammas=(1.0, 1.5)):
+    """Episode rows of 5 seeds × 2 episodes: `returns_by_step[step]` is each seed's return at γ = 1 (γ 1.5 the half)."""
+    rows = []
+    for step, per_seed in returns_by_step.items():
+        for gamma in gammas:
+            for seed, value in enumerate(per_seed, start=1):
+                for episode in range(2):
+                    rows.append({"env_id": env, "variant": variant, "config": f"{variant} mujoco=2.3.7", "seed": seed,
+                                 "step": step, "eval_guidance": gamma, "policy": "sample", "null_branch": "learned",
+                                 "return": value / gamma ** 2 + episode})  # fmt: skip
+    return rows
+
+
+def write_rows(path, rows):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_path):
+    import beyond_report
+
+    baseline = {200_000: [1000, 1100, 1200, 1300, 1400], 1_000_000: [2000, 2100, 2200, 2300, 2400]}
+    collapsing = {200_000: [1000, 1100, 1200, 1300, 3000], 1_000_000: [2000, 2100, 2200, 2300, 1000]}
+    write_rows(tmp_path / "table.csv", beyond_rows("Hopper-v4", "ppo", baseline))
+    write_rows(tmp_path / "beyond" / "Hopper-v4" / "episodes.csv", beyond_rows("Hopper-v4", "pgg_g1to1.2", collapsing))
+    args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"),
+                              table_heldout=str(tmp_path / "none.csv"))  # fmt: skip
+    written = beyond_report.report(args)
+    text = (tmp_path / "beyond" / "report.md").read_text()
+    assert "| PGG, γ_train 1 → 1.2 | 1M |" not in text  # rows are variant | baseline | step
+    assert "| PGG, γ_train 1 → 1.2 | PPO | 1M | -280.0 |" in text  # (2000+…+1000)/5 − (2000+…+2400)/5
+    assert "| 5 |" in text.split("collapsed |")[1].split("\n\n")[0]  # seed 5 fell below half its best mark
+    with open(written[1], newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["step"] for r in rows] == ["200000", "1000000"] and float(rows[1]["p_holm"]) >= float(rows[1]["p"])
+    # γ 1.5 returns are about the γ 1 ones / 2.25: the fall from the best γ to 1.5 is −55.5%
+    assert "-55.5%" in text.split("vs best |")[1]
+
+
+def test_goal_distance_is_the_tasks_own_distance_at_the_last_step():
+    import goal_distance
+
+    import eval_gamma_sweep as sweep
+    import ppo_pgg_continuous
+
+    torch.manual_seed(0)
+    agent = ppo_pgg_continuous.Agent(11, 2, null_dims=(4, 5, 8, 9, 10), action_bounds=(-np.ones(2), np.ones(2)))
+    ckpt = {"env_id": "Reacher-v4", "action_space": "continuous", "obs_dim": 11, "action_dim": 2}
+    policy = sweep.GuidedPolicy(agent, ckpt)
+    (total, distance), *_ = goal_distance.final_distances(policy, ckpt, 1.5, 2, 10_000)
+    env = sweep.make_eval_env(ckpt)  # the same episode by hand: its fingertip-to-target vector at the end
+    obs, _ = env.reset(seed=10_000)
+    noise = sweep.episode_noise("continuous", 10_000, 0, 50, 2)
+    for t in range(50):
+        obs, *_ = env.step(policy.act(obs[None], np.array([1.5]), noise[t : t + 1], False)[0])
+    assert distance == pytest.approx(np.linalg.norm(obs[8:11])) and total < 0
