@@ -271,7 +271,7 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
                      + f" | {pct(drop)} |")  # fmt: skip
     goal_gammas = sorted({g for (e, v, g) in distance if e == env})
     if goal_gammas:
-        lines += ["", (f"Final distance to the goal at {step_label(steps[-1])} (the last step's `reward_dist`, negated; "
+        lines += ["", (f"Final distance to the goal at {step_label(steps[-1])} (in the last observation; "
                   "lower is closer), mean ± 95% CI over seeds of the per-seed mean over episodes."), "",
                   "| variant | " + " | ".join(f"γ = {g:g}" for g in goal_gammas) + " |",
                   "|---|" + "---|" * len(goal_gammas)]  # fmt: skip

@@ -5,8 +5,10 @@ distance of every episode against the eval γ, for "Beyond the paper" (benchmark
         results/continuous/agents --envs Reacher-v4 Pusher-v4 --steps 1000000 --output results/beyond/goal_distance.csv
 
 Each (checkpoint, γ) plays the episodes of a sweep cell (reset seed eval_seed + k, the sweep's action
-noise for episode k) one at a time through the agent's `act`, and records the distance the task reports
-at its last step (`-info["reward_dist"]`: fingertip to target, object to goal). One row per episode.
+noise for episode k) one at a time through the agent's `act`, and records the distance in its last
+observation: Reacher's fingertip to target (dims 8-10), Pusher's object (17-19) to goal (20-22), from
+gymnasium's documentation of the v4 observations. The tasks' own `reward_dist` is measured before the
+step's action, one step early. One row per episode.
 """
 
 import sys
@@ -21,8 +23,12 @@ import eval_gamma_sweep as sweep
 from pgg_utils import runs
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
 from pgg_utils.identity import run_identity
-from pgg_utils.paper import GOAL_DIMS, PAPER_GAMMAS
+from pgg_utils.paper import PAPER_GAMMAS
 
+FINAL_DISTANCE = {
+    "Reacher-v4": lambda obs: float(np.linalg.norm(obs[8:11])),
+    "Pusher-v4": lambda obs: float(np.linalg.norm(obs[17:20] - obs[20:23])),
+}
 COLUMNS = ["env_id", "variant", "run", "seed", "step", "eval_guidance", "episode", "return", "final_distance"]
 
 
@@ -32,8 +38,8 @@ class Args:
     """agents folders, run directories or checkpoint files"""
     output: str
     """the CSV to write"""
-    envs: tuple[str, ...] = tuple(GOAL_DIMS)
-    """only checkpoints of these tasks (each must report reward_dist)"""
+    envs: tuple[str, ...] = tuple(FINAL_DISTANCE)
+    """only checkpoints of these tasks (each needs its FINAL_DISTANCE)"""
     steps: tuple[int, ...] | None = None
     """only these step marks; None: all"""
     gammas: tuple[float, ...] = PAPER_GAMMAS["continuous"]
@@ -52,12 +58,12 @@ def final_distances(policy, ckpt: dict, gamma: float, episodes: int, eval_seed: 
     for k in range(episodes):
         noise = sweep.episode_noise("continuous", eval_seed, k, horizon, action_size)
         obs, _ = env.reset(seed=eval_seed + k)
-        total, t, done, info = 0.0, 0, False, {}
+        total, t, done = 0.0, 0, False
         while not done:
             action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], False)[0]
-            obs, reward, terminated, truncated, info = env.step(action)
+            obs, reward, terminated, truncated, _ = env.step(action)
             total, t, done = total + float(reward), t + 1, terminated or truncated
-        out.append((total, -float(info["reward_dist"])))
+        out.append((total, FINAL_DISTANCE[ckpt["env_id"]](obs)))
     env.close()
     return out
 

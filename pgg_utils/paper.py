@@ -15,7 +15,8 @@ PAPER_GAMMAS = {
 VARIANTS = {"ppo": (1.0, 0.0), "pgg_g1.1": (1.1, 0.0), "pgg_drop0.1": (1.0, 0.1)}
 # The observation dimensions a goal-conditioned null embedding replaces (--null-dims), from gymnasium's
 # documentation of the v4 observations: Reacher's target position (4, 5) and fingertip-minus-target
-# vector (8, 9, 10); Pusher's goal position (20, 21, 22).
+# vector (8, 9, 10); Pusher's goal position (20, 21, 22). Reacher draws its target anew each episode;
+# Pusher's goal is the same in every episode (gymnasium's PusherEnv), so its goal null is a control.
 GOAL_DIMS = {"Reacher-v4": (4, 5, 8, 9, 10), "Pusher-v4": (20, 21, 22)}
 # Variants beyond the paper, the future work it names (scheduled and adaptive γ_train, guidance on a
 # goal), as the training flags that make them; "{goal}" stands for the task's GOAL_DIMS. Each id is the

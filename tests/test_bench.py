@@ -247,7 +247,7 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     assert "-55.5%" in text.split("vs best |")[1]
 
 
-def test_goal_distance_is_the_tasks_own_distance_at_the_last_step():
+def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
     import goal_distance
 
     import eval_gamma_sweep as sweep
