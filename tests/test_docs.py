@@ -7,7 +7,7 @@ import pytest
 from conftest import ROOT
 
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "results" / "README.md",
-         ROOT / "benchmarks" / "README.md"]  # fmt: skip
+         ROOT / "results" / "beyond" / "README.md", ROOT / "benchmarks" / "README.md"]  # fmt: skip
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 
 
