@@ -29,11 +29,16 @@ from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 import tyro
 
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pgg_utils.agreement import fmt, fmt_p, step_label
+from pgg_utils.figures import steps_formatter, variant_colour
 from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic
 from pgg_utils.paper import BEYOND_VARIANTS, paper_name, variant_rank
 from pgg_utils.stats import ALPHA, detectable_gap, holm, mean_ci95, median_relative_gap, sign_test, welch
@@ -284,83 +289,63 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
     return [*lines, ""]
 
 
+def band(ax, xs, per_x_values, variant: str) -> None:
+    """A variant's mean over seeds against x, with its 95% CI as a band."""
+    stats = [mean_ci95(values) for values in per_x_values]
+    mean, half = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
+    color = variant_colour(variant)
+    ax.plot(xs, mean, marker="o", ms=3, color=color, label=paper_name(variant))
+    ax.fill_between(xs, mean - half, mean + half, color=color, alpha=0.15)
+
+
+def panels(count: int, height: float):
+    fig, axes = plt.subplots(1, count, figsize=(4.3 * count, height), squeeze=False)
+    return fig, axes[0]
+
+
+def save(fig, axes, path: Path) -> None:
+    for ax in axes:  # each panel names its own variants: tasks differ in which were run
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def gamma_response_figure(means: dict, envs: list[str], variants_of: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pgg_utils.figures import variant_colour
-
-    fig, axes = plt.subplots(1, len(envs), figsize=(4.2 * len(envs), 3.4), squeeze=False)
-    for ax, env in zip(axes[0], envs):
+    fig, axes = panels(len(envs), 3.4)
+    for ax, env in zip(axes, envs):
         last = max(s for (e, v, s, g) in means if e == env)
         for variant in variants_of[env]:
             cells = cells_of(means, env, variant)
             gammas = sorted(g for (s, g) in cells if s == last)
-            stats = [mean_ci95(list(cells[(last, g)].values())) for g in gammas]
-            m, h = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
-            color = variant_colour(variant)
-            ax.plot(gammas, m, marker="o", ms=3, color=color, label=paper_name(variant))
-            ax.fill_between(gammas, m - h, m + h, color=color, alpha=0.15)
-        ax.set_title(f"{env}, {step_label(last)}")
-        ax.set_xlabel("eval guidance γ")
-        ax.set_ylabel("return")
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+            band(ax, gammas, [list(cells[(last, g)].values()) for g in gammas], variant)
+        ax.set(title=f"{env}, {step_label(last)}", xlabel="eval guidance γ", ylabel="return")
+    save(fig, axes, path)
 
 
 def trajectory_figure(trajectories: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pgg_utils.figures import steps_formatter, variant_colour
-
     keys = sorted(trajectories)
-    fig, axes = plt.subplots(1, len(keys), figsize=(4.2 * len(keys), 3.2), squeeze=False)
-    for ax, (env, variant) in zip(axes[0], keys):
+    fig, axes = panels(len(keys), 3.2)
+    for ax, (env, variant) in zip(axes, keys):
         for seed, points in sorted(trajectories[(env, variant)].items()):
             steps, gammas, _ = zip(*sorted(points))
             ax.plot(steps, gammas, color=variant_colour(variant), alpha=0.7, lw=1, label=f"seed {seed}")
         ax.set_title(f"{env}\n{paper_name(variant)}", fontsize=9)
-        ax.set_xlabel("training steps")
-        ax.set_ylabel("γ_train")
+        ax.set(xlabel="training steps", ylabel="γ_train")
         ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(steps_formatter))
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save(fig, axes, path)
 
 
 def distance_figure(distance: dict, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from pgg_utils.figures import variant_colour
-
     envs = sorted({e for (e, v, g) in distance})
-    fig, axes = plt.subplots(1, len(envs), figsize=(4.4 * len(envs), 3.4), squeeze=False)
-    for ax, env in zip(axes[0], envs):
+    fig, axes = panels(len(envs), 3.4)
+    for ax, env in zip(axes, envs):
         for variant in sorted({v for (e, v, g) in distance if e == env}, key=lambda v: (variant_rank(v), v)):
             gammas = sorted(g for (e, v, g) in distance if e == env and v == variant)
-            stats = [mean_ci95(distance[(env, variant, g)]) for g in gammas]
-            m, h = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
-            color = variant_colour(variant)
-            ax.plot(gammas, m, marker="o", ms=3, color=color, label=paper_name(variant))
-            ax.fill_between(gammas, m - h, m + h, color=color, alpha=0.15)
+            band(ax, gammas, [distance[(env, variant, g)] for g in gammas], variant)
         ax.set_title(f"{env}: final distance to the goal", fontsize=10)
-        ax.set_xlabel("eval guidance γ")
-        ax.set_ylabel("distance (lower is closer)")
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+        ax.set(xlabel="eval guidance γ", ylabel="distance (lower is closer)")
+    save(fig, axes, path)
 
 
 def report(args: Args) -> list[Path]:
