@@ -680,14 +680,8 @@ def checkpoint_shapes(envs) -> dict:
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
     runs.require_kind(ckpt, ACTION_SPACE, source)
-    shapes = {"obs_dim": ckpt["obs_dim"], "action_dim": ckpt["action_dim"]}
-    if np.isfinite(ckpt.get("action_low", [-np.inf])).all() and np.isfinite(ckpt.get("action_high", [np.inf])).all():
-        shapes.update(action_low=ckpt["action_low"], action_high=ckpt["action_high"])
-    else:  # older checkpoints hold ClipAction's ±inf there: the environment's own bounds
-        probe = make_env(ckpt["env_id"])()
-        shapes.update(action_low=probe.action_space.low, action_high=probe.action_space.high)
-        probe.close()
-    agent = make_agent(ckpt["args"], shapes)
+    low, high = runs.action_bounds(ckpt)
+    agent = make_agent(ckpt["args"], {**ckpt, "action_low": low, "action_high": high})
     agent.load_state_dict(ckpt["model"])
     return agent.eval()
 

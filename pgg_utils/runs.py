@@ -231,6 +231,18 @@ def code_revision(script: Path) -> dict:
     return {"commit": commit, "modified": modified, "sha1": digest, "files": [f.name for f in files]}
 
 
+def action_bounds(ckpt: dict) -> tuple:
+    """(low, high) of a continuous checkpoint's task. Checkpoints saved before the bounds were recorded
+    hold ClipAction's ±inf there; the environment's own are then read from the task."""
+    low, high = ckpt.get("action_low", [-math.inf]), ckpt.get("action_high", [math.inf])
+    if np.isfinite(low).all() and np.isfinite(high).all():
+        return low, high
+    env = gym.make(ckpt["env_id"])
+    low, high = env.action_space.low, env.action_space.high
+    env.close()
+    return low, high
+
+
 def require_kind(ckpt: dict, kind: str, source: str | Path = "checkpoint") -> None:
     """ValueError unless `ckpt` is a checkpoint of a `kind` (discrete/continuous) script, of a readable format."""
     if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != kind:

@@ -302,3 +302,12 @@ def test_the_numpy_copy_steps_aside_for_a_network_it_does_not_know():
         assert torch.equal(torch.get_rng_state(), state)
         with torch.no_grad():
             np.testing.assert_array_equal(forward(x), network(torch.from_numpy(x)).numpy())
+
+
+def test_a_checkpoint_with_clip_actions_infinite_bounds_acts_within_the_tasks(tmp_path):
+    run_dir = train(ppo_pgg_continuous, small_args("continuous", tmp_path))
+    ckpt = load(run_dir, 768)
+    old = {**ckpt, "action_low": [float("-inf")] * 17, "action_high": [float("inf")] * 17}  # as saved before
+    agent = ppo_pgg_continuous.agent_from_checkpoint(old)
+    np.testing.assert_array_equal(agent.action_bounds[1], np.full(17, 0.4, np.float32))  # Humanoid's own
+    assert np.abs(agent.act(np.zeros(ckpt["obs_dim"]), guidance=50.0, noise=np.full((1, 17), 9.0))).max() == 0.4
