@@ -8,11 +8,13 @@ table their own PPO and γ_train 1.1 runs), the continuous table's episodes for 
 paper's tasks, `results/beyond/<task>/heldout_gamma.csv` where the held-out selection was run, and
 `results/beyond/goal_distance.csv` (benchmarks/goal_distance.py) where it exists. Writes into the
 folder, atomically:
-  report.md    per task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, collapsed
-               runs), each new variant against each baseline (Welch + Holm over the whole report, the gap
-               each test can detect at 80% power, a sign test over the cells of both sweeps, the pooled
-               median gap over every (step, γ) cell with its exact bootstrap interval), the held-out γ,
-               the γ-response at the last step, and the final distance to the goal against γ
+  report.md    at a glance, a table per question (the γ-response at the last mark of the scheduled and
+               adaptive variants and their baselines; the final distance to the goal against γ); then per
+               task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, collapsed runs),
+               each new variant against each baseline (Welch + Holm over the whole report, the gap each
+               test can detect at 80% power, a sign test over the cells of both sweeps, the pooled median
+               gap over every (step, γ) cell with its exact bootstrap interval), the held-out γ, the
+               γ-response at the last step, and the final distance to the goal against γ
   report.csv   one row per (task, variant, baseline, step) at γ = 1: the tests' numbers
   gamma_response.png   return against eval γ at the last step, a panel per task
   guidance_trajectory.png   γ_train over training of the scheduled and adaptive runs
@@ -44,6 +46,7 @@ from pgg_utils.paper import BEYOND_VARIANTS, paper_name, variant_rank
 from pgg_utils.stats import ALPHA, detectable_gap, holm, mean_ci95, median_relative_gap, sign_test, welch
 
 BASELINES = ("ppo", "pgg_g1.1")
+GOAL_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "{goal}" in flags}
 COLLAPSE_FRACTION = 0.5
 REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
                   "p", "p_holm", "detectable_gap", "n_seeds", "baseline_n_seeds"]  # fmt: skip
@@ -269,8 +272,7 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
               "| variant | " + " | ".join(f"γ = {g:g}" for g in gammas) + f" | γ = {gammas[-1]:g} vs best |",
               "|---|" + "---|" * (len(gammas) + 1)]  # fmt: skip
     for variant in variants:
-        cells = cells_of(means, env, variant)
-        values = [summary(cells[(steps[-1], g)])[0] if (steps[-1], g) in cells else math.nan for g in gammas]
+        _, values = response_at_last_step(means, env, variant)
         drop = (values[-1] - np.nanmax(values)) / abs(np.nanmax(values))
         lines.append(f"| {paper_name(variant)} | " + " | ".join("–" if math.isnan(v) else f"{v:.1f}" for v in values)
                      + f" | {pct(drop)} |")  # fmt: skip
@@ -287,6 +289,52 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
                 out.append(f"{mean_ci95(values)[0]:.4f} ± {mean_ci95(values)[1]:.4f}" if values else "–")
             lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + " |")
     return [*lines, ""]
+
+
+def response_at_last_step(means: dict, env: str, variant: str) -> tuple[list[float], list[float]]:
+    """The eval γ list at the task's last step and the variant's mean return over seeds at each (nan where unswept)."""
+    last = max(s for (e, v, s, g) in means if e == env)
+    gammas = sorted({g for (e, v, s, g) in means if e == env and s == last})
+    cells = cells_of(means, env, variant)
+    return gammas, [summary(cells[(last, g)])[0] if (last, g) in cells else math.nan for g in gammas]
+
+
+def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
+    """One table per question, the numbers the verdicts rest on; each task's section below has the rest."""
+    lines = ["## At a glance", ""]
+    scheduled = [e for e, vs in variants_of.items() if any(v in BEYOND_VARIANTS and v not in GOAL_VARIANTS for v in vs)]
+    if scheduled:
+        lines += [("Did scheduling or adapting γ_train remove the fall past a modest γ? At the last mark: the "
+                  "return at γ = 1, the best eval γ, the largest γ swept and how far it falls below the best, and "
+                  "the runs that collapsed."), "",
+                  "| task | variant | γ = 1 | best γ: return | largest γ: return | largest vs best | collapsed |",
+                  "|---|---|---|---|---|---|---|"]  # fmt: skip
+        for env in scheduled:
+            for variant in (v for v in variants_of[env] if v not in GOAL_VARIANTS):
+                gammas, values = response_at_last_step(means, env, variant)
+                best = int(np.nanargmax(values))
+                drop = (values[-1] - values[best]) / abs(values[best])
+                cells = cells_of(means, env, variant)
+                seeds = len(cells[(max(s for s, g in cells), 1.0)])
+                lines.append(f"| {env} | {paper_name(variant)} | {values[0]:.1f} | {gammas[best]:g}: {values[best]:.1f} | "
+                             f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {len(collapsed(cells))} of {seeds} |")  # fmt: skip
+        lines.append("")
+    goal_envs = sorted({e for (e, v, g) in distance})
+    if goal_envs:
+        lines += [("Does guiding on the goal give a knob that state guidance lacks? The final distance to the goal "
+                  "(mean over seeds) at γ = 1, at the eval γ that brings it closest, and at the largest γ swept."), "",
+                  "| task | variant | γ = 1 | closest γ: distance | largest γ: distance | largest vs γ = 1 |",
+                  "|---|---|---|---|---|---|"]  # fmt: skip
+        for env in goal_envs:
+            for variant in sorted({v for (e, v, g) in distance if e == env}, key=lambda v: (variant_rank(v), v)):
+                gammas = sorted(g for (e, v, g) in distance if e == env and v == variant)
+                values = [float(np.mean(distance[(env, variant, g)])) for g in gammas]
+                closest = int(np.argmin(values))
+                lines.append(f"| {env} | {paper_name(variant)} | {values[0]:.4f} | {gammas[closest]:g}: "
+                             f"{values[closest]:.4f} | {gammas[-1]:g}: {values[-1]:.4f} | "
+                             f"{pct((values[-1] - values[0]) / values[0])} |")  # fmt: skip
+        lines.append("")
+    return lines
 
 
 def band(ax, xs, per_x_values, variant: str) -> None:
@@ -386,7 +434,7 @@ def report(args: Args) -> list[Path]:
              (f"Generated by `python benchmarks/beyond_report.py {args.folder} --table {args.table}` from the committed "
              "episode CSVs. Baselines of the paper's tasks come from the continuous table's runs (the same code "
              "class: the same algorithm trained with --compile, MuJoCo 2.3.7, on another CPU); Reacher-v4's are "
-             "trained here."), ""]  # fmt: skip
+             "trained here."), "", *glance_section(means, variants_of, distance)]  # fmt: skip
     for env in envs:
         lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories)
     written = [folder / "report.md", folder / "report.csv", folder / "gamma_response.png"]

@@ -233,18 +233,28 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     collapsing = {200_000: [1000, 1100, 1200, 1300, 3000], 1_000_000: [2000, 2100, 2200, 2300, 1000]}
     write_rows(tmp_path / "table.csv", beyond_rows("Hopper-v4", "ppo", baseline))
     write_rows(tmp_path / "beyond" / "Hopper-v4" / "episodes.csv", beyond_rows("Hopper-v4", "pgg_g1to1.2", collapsing))
+    distances = {1.0: 0.10, 1.2: 0.08, 1.5: 0.12}  # goal guidance that brings the fingertip closest at γ = 1.2
+    write_rows(tmp_path / "beyond" / "goal_distance.csv",
+               [{"env_id": "Reacher-v4", "variant": "pgg_g1.1_goal", "seed": seed, "eval_guidance": gamma,
+                 "final_distance": d + 0.01 * seed} for gamma, d in distances.items() for seed in (1, 2)])  # fmt: skip
     args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"),
                               table_heldout=str(tmp_path / "none.csv"))  # fmt: skip
     written = beyond_report.report(args)
     text = (tmp_path / "beyond" / "report.md").read_text()
+    assert "| Reacher-v4 | PGG, γ_train = 1.1, goal null | 0.1150 | 1.2: 0.0950 | 1.5: 0.1350 | +17.4% |" in text
     assert "| PGG, γ_train 1 → 1.2 | 1M |" not in text  # rows are variant | baseline | step
     assert "| PGG, γ_train 1 → 1.2 | PPO | 1M | -280.0 |" in text  # (2000+…+1000)/5 − (2000+…+2400)/5
-    assert "| 5 |" in text.split("collapsed |")[1].split("\n\n")[0]  # seed 5 fell below half its best mark
+    task = text.split("## Hopper-v4")[1]
+    assert "| 5 |" in task.split("collapsed |")[1].split("\n\n")[0]  # seed 5 fell below half its best mark
     with open(written[1], newline="") as f:
         rows = list(csv.DictReader(f))
     assert [r["step"] for r in rows] == ["200000", "1000000"] and float(rows[1]["p_holm"]) >= float(rows[1]["p"])
     # γ 1.5 returns are about the γ 1 ones / 2.25: the fall from the best γ to 1.5 is −55.5%
-    assert "-55.5%" in text.split("vs best |")[1]
+    assert "-55.5%" in task.split("vs best |")[1]
+    # the glance table (means over two episodes, +0.5): γ = 1 is best at 1M, and seed 5 collapsed
+    glance = text.split("## At a glance")[1].split("## Hopper-v4")[0]
+    assert "| Hopper-v4 | PGG, γ_train 1 → 1.2 | 1920.5 | 1: 1920.5 | 1.5: 853.8 | -55.5% | 1 of 5 |" in glance
+    assert "| Hopper-v4 | PPO | 2200.5 | 1: 2200.5 | 1.5: 978.3 | -55.5% | 0 of 5 |" in glance
 
 
 def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
