@@ -73,3 +73,25 @@ def test_the_readmes_trained_agent_snippet_runs():
     proc = subprocess.run([sys.executable, "-c", seeded], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     assert float(proc.stdout.strip()) > 1000  # a trained Hopper at γ = 1.2 hops
+
+
+NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?![\w.])")
+
+
+def rounds_from(text: str, values: list[float]) -> bool:
+    """Whether `text` (a number as written) is one of `values` rounded to as many decimals as it shows."""
+    decimals = len(text.partition(".")[2])
+    return any(abs(v - float(text)) <= 0.5 * 10**-decimals + 1e-9 for v in values)
+
+
+def test_the_readmes_beyond_the_paper_numbers_come_from_its_report():
+    """Each number in the README's "Beyond the paper" section rounds from one in results/beyond/report.md,
+    so a report regenerated with other figures fails this until the front page follows. It cannot tell
+    which cell a number came from: a figure quoted for the wrong variant passes where the report holds
+    it elsewhere, and a small integer matches almost anything."""
+    readme = (ROOT / "README.md").read_text()
+    section = LINK.sub("", readme.split("## Beyond the paper\n", 1)[1].split("\n## ", 1)[0])  # paths are no figures
+    reported = [float(x) for x in NUMBER.findall((ROOT / "results" / "beyond" / "report.md").read_text())]
+    quoted = NUMBER.findall(section)
+    assert len(quoted) > 10 and not rounds_from("123456.7", reported)
+    assert not [x for x in quoted if not rounds_from(x, reported)]
