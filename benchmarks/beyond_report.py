@@ -299,10 +299,17 @@ def response_at_last_step(means: dict, env: str, variant: str) -> tuple[list[flo
     return gammas, [summary(cells[(last, g)])[0] if (last, g) in cells else math.nan for g in gammas]
 
 
+def scheduled_tasks(variants_of: dict) -> list[str]:
+    """The tasks with a scheduled or adaptive γ_train variant, sorted."""
+    return sorted(
+        e for e, vs in variants_of.items() if any(v in BEYOND_VARIANTS and v not in GOAL_VARIANTS for v in vs)
+    )
+
+
 def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
     """One table per question, the numbers the verdicts rest on; each task's section below has the rest."""
     lines = ["## At a glance", ""]
-    scheduled = [e for e, vs in variants_of.items() if any(v in BEYOND_VARIANTS and v not in GOAL_VARIANTS for v in vs)]
+    scheduled = scheduled_tasks(variants_of)
     if scheduled:
         lines += [("Did scheduling or adapting γ_train remove the fall past a modest γ? At the last mark: the "
                   "return at γ = 1, the best eval γ, the largest γ swept and how far it falls below the best, and "
@@ -346,9 +353,14 @@ def band(ax, xs, per_x_values, variant: str) -> None:
     ax.fill_between(xs, mean - half, mean + half, color=color, alpha=0.15)
 
 
-def panels(count: int, height: float):
-    fig, axes = plt.subplots(1, count, figsize=(4.3 * count, height), squeeze=False)
-    return fig, axes[0]
+def panels(count: int, height: float, columns: int = 3):
+    """`count` panels, `columns` to a row; the unused ones of the last row are hidden."""
+    rows, columns = -(-count // columns), min(count, columns)
+    fig, grid = plt.subplots(rows, columns, figsize=(4.3 * columns, height * rows), squeeze=False)
+    axes = list(grid.flat)
+    for ax in axes[count:]:
+        ax.set_visible(False)
+    return fig, axes[:count]
 
 
 def save(fig, axes, path: Path) -> None:
@@ -360,6 +372,8 @@ def save(fig, axes, path: Path) -> None:
 
 
 def gamma_response_figure(means: dict, envs: list[str], variants_of: dict, path: Path) -> None:
+    """A panel per task: the tasks of the schedules first (a row of their own for the paper's three), then the goal's."""
+    envs = [*scheduled_tasks(variants_of), *(e for e in envs if e not in scheduled_tasks(variants_of))]
     fig, axes = panels(len(envs), 3.4)
     for ax, env in zip(axes, envs):
         last = max(s for (e, v, s, g) in means if e == env)
@@ -373,7 +387,7 @@ def gamma_response_figure(means: dict, envs: list[str], variants_of: dict, path:
 
 def trajectory_figure(trajectories: dict, path: Path) -> None:
     keys = sorted(trajectories)
-    fig, axes = panels(len(keys), 3.2)
+    fig, axes = panels(len(keys), 3.2, columns=len({v for e, v in keys}))  # a row per task
     for ax, (env, variant) in zip(axes, keys):
         for seed, points in sorted(trajectories[(env, variant)].items()):
             steps, gammas, _ = zip(*sorted(points))
