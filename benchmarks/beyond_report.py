@@ -10,7 +10,7 @@ paper's tasks, `results/beyond/<task>/heldout_gamma.csv` where the held-out sele
 folder, atomically:
   report.md    at a glance, a table per question (the γ-response at the last mark of the scheduled and
                adaptive variants and their baselines; the final distance to the goal against γ); then per
-               task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, collapsed runs),
+               task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, runs that fell),
                each new variant against each baseline (Welch + Holm over the whole report, the gap each
                test can detect at 80% power, a sign test over the cells of both sweeps, the pooled median
                gap over every (step, γ) cell with its exact bootstrap interval), the held-out γ, the
@@ -21,7 +21,8 @@ folder, atomically:
   goal_distance.png    the final distance to the goal against eval γ, a panel per goal task
 With `--runs runs/beyond` it first rewrites `guidance_trajectory.csv` (γ_train and the KL of every
 iteration of every run, from the runs' TensorBoard events, which are not committed); without it the
-committed CSV is read. A run "collapses" where its γ = 1 return at the last step is below half of its best mark's.
+committed CSV is read. A run "fell" where its return at the last step is below half of its best mark's: at
+γ = 1, and at every γ (its best eval γ of each mark), which only a run that broke does.
 """
 
 import csv
@@ -125,15 +126,21 @@ def summary(seeds: dict) -> tuple[float, float, float]:
     return mean, half, float(np.std(values, ddof=1)) if len(values) > 1 else math.nan
 
 
-def collapsed(cells: dict) -> list[int]:
-    """Seeds whose γ = 1 return at the last step is below COLLAPSE_FRACTION of their best mark's."""
-    at_one = {step: seeds for (step, gamma), seeds in cells.items() if gamma == 1.0}
-    if not at_one:
+def collapsed(cells: dict, every_gamma: bool = False) -> list[int]:
+    """Seeds whose return at the last step is below COLLAPSE_FRACTION of their best mark's: at γ = 1, or with
+    `every_gamma` at their best eval γ of each mark. A schedule that ends at γ_train 1.2 trains the policy
+    guided at 1.2, so its γ = 1 return can fall while the policy it rolled out holds: only the second is a
+    run that broke."""
+    by_step = defaultdict(lambda: defaultdict(lambda: -math.inf))
+    for (step, gamma), seeds in cells.items():
+        if every_gamma or gamma == 1.0:
+            for seed, value in seeds.items():
+                by_step[step][seed] = max(by_step[step][seed], value)
+    if not by_step:
         return []
-    last = max(at_one)
-    out = []
-    for seed, final in at_one[last].items():
-        best = max(at_one[step].get(seed, -math.inf) for step in at_one)
+    last, out = max(by_step), []
+    for seed, final in by_step[last].items():
+        best = max(by_step[step][seed] for step in by_step)
         if best > 0 and final < COLLAPSE_FRACTION * best:
             out.append(seed)
     return sorted(out)
@@ -216,10 +223,10 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
                 cells.append(f"{np.mean(values):.3f} ({min(values):.3f}–{max(values):.3f})" if values else "–")
             lines.append(f"| {paper_name(variant)} | " + " | ".join(cells) + " |")
         lines.append("")
-    lines += [("Return at γ = 1, mean ± 95% CI over seeds (seed sd); runs that collapse (γ = 1 return at the last "
-              "step below half their best mark's) named by seed."), "",
-              "| variant | " + " | ".join(step_label(s) for s in steps) + " | collapsed |",
-              "|---|" + "---|" * (len(steps) + 1)]  # fmt: skip
+    lines += [("Return at γ = 1, mean ± 95% CI over seeds (seed sd); runs whose return at the last step fell below "
+              "half their best mark's, named by seed: at γ = 1, and at every γ (the best eval γ of each mark)."), "",
+              "| variant | " + " | ".join(step_label(s) for s in steps) + " | fell at γ = 1 | fell at every γ |",
+              "|---|" + "---|" * (len(steps) + 2)]  # fmt: skip
     for variant in variants:
         cells = cells_of(means, env, variant)
         out = []
@@ -229,8 +236,8 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
                 out.append(f"{m:.1f} ± {h:.1f} ({s:.0f})")
             else:
                 out.append("–")
-        gone = collapsed(cells)
-        lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + f" | {', '.join(map(str, gone)) or 'none'} |")
+        fell = [", ".join(map(str, collapsed(cells, every))) or "none" for every in (False, True)]
+        lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + f" | {fell[0]} | {fell[1]} |")
     lines += ["", ("Each new variant against each baseline at γ = 1 (Welch's t test, Holm over every test of this "
               "report; the gap the test detects with 80% power at α = 0.05 beside it), then over every (step, eval γ) "
               "cell both sweeps hold: a sign test (the cells of one run share its seeds, so it overstates their "
@@ -313,9 +320,9 @@ def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
     if scheduled:
         lines += [("Did scheduling or adapting γ_train remove the fall past a modest γ? At the last mark: the "
                   "return at γ = 1, the best eval γ, the largest γ swept and how far it falls below the best, and "
-                  "the runs that collapsed."), "",
-                  "| task | variant | γ = 1 | best γ: return | largest γ: return | largest vs best | collapsed |",
-                  "|---|---|---|---|---|---|---|"]  # fmt: skip
+                  "the runs whose return fell below half their best mark's, at γ = 1 and at every γ."), "",
+                  ("| task | variant | γ = 1 | best γ: return | largest γ: return | largest vs best | fell at γ = 1 | "
+                  "fell at every γ |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for env in scheduled:
             for variant in (v for v in variants_of[env] if v not in GOAL_VARIANTS):
                 gammas, values = response_at_last_step(means, env, variant)
@@ -324,7 +331,8 @@ def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
                 cells = cells_of(means, env, variant)
                 seeds = len(cells[(max(s for s, g in cells), 1.0)])
                 lines.append(f"| {env} | {paper_name(variant)} | {values[0]:.1f} | {gammas[best]:g}: {values[best]:.1f} | "
-                             f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {len(collapsed(cells))} of {seeds} |")  # fmt: skip
+                             f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {len(collapsed(cells))} of {seeds} | "
+                             f"{len(collapsed(cells, every_gamma=True))} of {seeds} |")  # fmt: skip
         lines.append("")
     goal_envs = sorted({e for (e, v, g) in distance})
     if goal_envs:

@@ -232,7 +232,11 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     baseline = {200_000: [1000, 1100, 1200, 1300, 1400], 1_000_000: [2000, 2100, 2200, 2300, 2400]}
     collapsing = {200_000: [1000, 1100, 1200, 1300, 3000], 1_000_000: [2000, 2100, 2200, 2300, 1000]}
     write_rows(tmp_path / "table.csv", beyond_rows("Hopper-v4", "ppo", baseline))
-    write_rows(tmp_path / "beyond" / "Hopper-v4" / "episodes.csv", beyond_rows("Hopper-v4", "pgg_g1to1.2", collapsing))
+    # a schedule's policy that moved to γ 1.5: its γ = 1 return falls by 3/4, its γ 1.5 one stays above half the best
+    moved = [{**r, "return": r["return"] * (5 if r["step"] == 1_000_000 and r["eval_guidance"] == 1.5 else 1)}
+             for r in beyond_rows("Hopper-v4", "pgg_adaptive1.1_kl0.04", {200_000: [2000] * 5, 1_000_000: [500] * 5})]  # fmt: skip
+    write_rows(tmp_path / "beyond" / "Hopper-v4" / "episodes.csv",
+               beyond_rows("Hopper-v4", "pgg_g1to1.2", collapsing) + moved)  # fmt: skip
     distances = {1.0: 0.10, 1.2: 0.08, 1.5: 0.12}  # goal guidance that brings the fingertip closest at γ = 1.2
     write_rows(tmp_path / "beyond" / "goal_distance.csv",
                [{"env_id": "Reacher-v4", "variant": "pgg_g1.1_goal", "seed": seed, "eval_guidance": gamma,
@@ -245,16 +249,18 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     assert "| PGG, γ_train 1 → 1.2 | 1M |" not in text  # rows are variant | baseline | step
     assert "| PGG, γ_train 1 → 1.2 | PPO | 1M | -280.0 |" in text  # (2000+…+1000)/5 − (2000+…+2400)/5
     task = text.split("## Hopper-v4")[1]
-    assert "| 5 |" in task.split("collapsed |")[1].split("\n\n")[0]  # seed 5 fell below half its best mark
+    assert "| 5 | 5 |" in task.split("fell at every γ |")[1].split("\n\n")[0]  # seed 5 fell below half its best mark
     with open(written[1], newline="") as f:
-        rows = list(csv.DictReader(f))
+        rows = [r for r in csv.DictReader(f) if r["variant"] == "pgg_g1to1.2"]
     assert [r["step"] for r in rows] == ["200000", "1000000"] and float(rows[1]["p_holm"]) >= float(rows[1]["p"])
     # γ 1.5 returns are about the γ 1 ones / 2.25: the fall from the best γ to 1.5 is −55.5%
     assert "-55.5%" in task.split("vs best |")[1]
     # the glance table (means over two episodes, +0.5): γ = 1 is best at 1M, and seed 5 collapsed
     glance = text.split("## At a glance")[1].split("## Hopper-v4")[0]
-    assert "| Hopper-v4 | PGG, γ_train 1 → 1.2 | 1920.5 | 1: 1920.5 | 1.5: 853.8 | -55.5% | 1 of 5 |" in glance
-    assert "| Hopper-v4 | PPO | 2200.5 | 1: 2200.5 | 1.5: 978.3 | -55.5% | 0 of 5 |" in glance
+    assert "| Hopper-v4 | PGG, γ_train 1 → 1.2 | 1920.5 | 1: 1920.5 | 1.5: 853.8 | -55.5% | 1 of 5 | 1 of 5 |" in glance
+    assert "| Hopper-v4 | PPO | 2200.5 | 1: 2200.5 | 1.5: 978.3 | -55.5% | 0 of 5 | 0 of 5 |" in glance
+    # (500 / 2.25 + 0.5) × 5 = 1113.6 at γ 1.5 against 2000.5 at γ 1 at 200k: fell at γ = 1 only
+    assert "| 500.5 | 1.5: 1113.6 | 1.5: 1113.6 | +0.0% | 5 of 5 | 0 of 5 |" in glance
 
 
 def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
