@@ -9,7 +9,8 @@ paper's tasks, `results/beyond/<task>/heldout_gamma.csv` where the held-out sele
 `results/beyond/goal_distance.csv` (benchmarks/goal_distance.py) where it exists. Writes into the
 folder, atomically:
   report.md    at a glance, a table per question (the γ-response at the last mark of the scheduled and
-               adaptive variants and their baselines; the final distance to the goal against γ); then per
+               adaptive variants and their baselines, with Welch tests of their per-seed fall from the best γ
+               to the largest against the baselines'; the final distance to the goal against γ); then per
                task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, runs that fell),
                each new variant against each baseline (Welch + Holm over the whole report, the gap each
                test can detect at 80% power, a sign test over the cells of both sweeps, the pooled median
@@ -203,6 +204,11 @@ def pct(x: float) -> str:
     return "–" if math.isnan(x) else f"{100 * x:+.1f}%"
 
 
+def points(x: float, sign: bool = True) -> str:
+    """A difference of two percentages, in percentage points."""
+    return "–" if math.isnan(x) else f"{100 * x:{'+' if sign else ''}.1f} pts"
+
+
 def task_section(env: str, means: dict, variants: list[str], rows: list[dict], pooled: dict, heldout: dict,
                  distance: dict, trajectories: dict) -> list[str]:  # fmt: skip
     lines = [f"## {env}", ""]
@@ -313,6 +319,31 @@ def scheduled_tasks(variants_of: dict) -> list[str]:
     )
 
 
+def seed_falls(means: dict, env: str, variant: str) -> list[float]:
+    """Each seed's relative fall at the last step from the variant's best eval γ (best on the mean) to the largest γ."""
+    gammas, values = response_at_last_step(means, env, variant)
+    last = max(s for (e, v, s, g) in means if e == env)
+    cells = cells_of(means, env, variant)
+    at_best, at_largest = cells[(last, gammas[int(np.nanargmax(values))])], cells[(last, gammas[-1])]
+    return [(at_largest[seed] - at_best[seed]) / abs(at_best[seed]) for seed in sorted(at_best) if seed in at_largest]
+
+
+def fall_tests(means: dict, variants_of: dict) -> list[dict]:
+    """Each schedule's per-seed fall against each baseline's: Welch's t, Holm over these tests alone."""
+    rows = []
+    for env in scheduled_tasks(variants_of):
+        for variant in (v for v in variants_of[env] if v in BEYOND_VARIANTS and v not in GOAL_VARIANTS):
+            ours = seed_falls(means, env, variant)
+            for baseline in (b for b in BASELINES if b in variants_of[env]):
+                theirs = seed_falls(means, env, baseline)
+                (m1, s1, n1), (m2, s2, n2) = ((np.mean(x), np.std(x, ddof=1), len(x)) for x in (ours, theirs))
+                rows.append({"env_id": env, "variant": variant, "baseline": baseline, "fall": m1, "baseline_fall": m2,
+                             "p": welch(m1, s1, n1, m2, s2, n2)[2], "detectable": detectable_gap(s1, n1, s2, n2, ALPHA)})  # fmt: skip
+    for row, p_holm in zip(rows, holm([r["p"] for r in rows])):
+        row["p_holm"] = p_holm
+    return rows
+
+
 def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
     """One table per question, the numbers the verdicts rest on; each task's section below has the rest."""
     lines = ["## At a glance", ""]
@@ -333,6 +364,16 @@ def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
                 lines.append(f"| {env} | {paper_name(variant)} | {values[0]:.1f} | {gammas[best]:g}: {values[best]:.1f} | "
                              f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {len(collapsed(cells))} of {seeds} | "
                              f"{len(collapsed(cells, every_gamma=True))} of {seeds} |")  # fmt: skip
+        lines += ["", ("Is the fall smaller than the baselines'? Each seed's fall at the last mark from the variant's "
+                  "best γ (above) to the largest, relative to its return at the best γ; the mean over seeds against "
+                  "each baseline's, Welch's t test (Holm over these tests alone), and the difference in falls the test "
+                  "detects with 80% power at α = 0.05."), "",
+                  "| task | variant | baseline | fall | baseline's fall | difference | p (Holm) | detectable difference |",
+                  "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for r in fall_tests(means, variants_of):
+            lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {pct(r['fall'])} | "
+                         f"{pct(r['baseline_fall'])} | {points(r['fall'] - r['baseline_fall'])} | {fmt_p(r['p'])} "
+                         f"({fmt_p(r['p_holm'])}) | {points(r['detectable'], sign=False)} |")  # fmt: skip
         lines.append("")
     goal_envs = sorted({e for (e, v, g) in distance})
     if goal_envs:
