@@ -237,6 +237,8 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
              for r in beyond_rows("Hopper-v4", "pgg_adaptive1.1_kl0.04", {200_000: [2000] * 5, 1_000_000: [500] * 5})]  # fmt: skip
     write_rows(tmp_path / "beyond" / "Hopper-v4" / "episodes.csv",
                beyond_rows("Hopper-v4", "pgg_g1to1.2", collapsing) + moved)  # fmt: skip
+    write_rows(tmp_path / "beyond" / "Reacher-v4" / "episodes.csv",
+               beyond_rows("Reacher-v4", "pgg_g1.1_goal", {1_000_000: [-5, -6, -7, -8, -9]}))  # fmt: skip
     distances = {1.0: 0.10, 1.2: 0.08, 1.5: 0.12}  # goal guidance that brings the fingertip closest at γ = 1.2
     write_rows(tmp_path / "beyond" / "goal_distance.csv",
                [{"env_id": "Reacher-v4", "variant": "pgg_g1.1_goal", "seed": seed, "eval_guidance": gamma,
@@ -248,8 +250,11 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     assert "| Reacher-v4 | PGG, γ_train = 1.1, goal null | 0.1150 | 1.2: 0.0950 | 1.5: 0.1350 | +17.4% |" in text
     assert "| PGG, γ_train 1 → 1.2 | 1M |" not in text  # rows are variant | baseline | step
     assert "| PGG, γ_train 1 → 1.2 | PPO | 1M | -280.0 |" in text  # (2000+…+1000)/5 − (2000+…+2400)/5
-    task = text.split("## Hopper-v4")[1]
-    assert "| 5 | 5 |" in task.split("fell at every γ |")[1].split("\n\n")[0]  # seed 5 fell below half its best mark
+    assert "| n/a | n/a |" in text.split("## Reacher-v4")[1]  # half a cost means nothing
+    task = text.split("## Hopper-v4")[1].split("## Reacher-v4")[0]
+    fell = task.split("fell at its best γ |")[1].split("\n\n")[0]
+    assert "| 5 | 5 |" in fell  # seed 5 fell below half its best mark at γ = 1 and at its best γ
+    assert "| 1, 2, 3, 4, 5 | none |" in fell  # the moved policy fell at γ = 1 only
     with open(written[1], newline="") as f:
         rows = [r for r in csv.DictReader(f) if r["variant"] == "pgg_g1to1.2"]
     assert [r["step"] for r in rows] == ["200000", "1000000"] and float(rows[1]["p_holm"]) >= float(rows[1]["p"])
@@ -263,7 +268,33 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     assert "| 500.5 | 1.5: 1113.6 | 1.5: 1113.6 | +0.0% | 5 of 5 | 0 of 5 |" in glance
     # its seeds do not fall from their best γ (1.5) to the largest (1.5); PPO's fall from γ 1 by 55.5% each
     fall = glance.split("| Hopper-v4 | PGG, adaptive γ_train from 1.1, KL target 0.04 | PPO | ")[1].split("\n")[0]
-    assert fall.startswith("+0.0% | -55.5% | +55.5 pts | <0.001 (<0.001) |")
+    assert fall.startswith("1.5 (1) | +0.0% | -55.5% | +55.5 pts | <0.001 (<0.001) |")
+
+
+def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the_baselines():
+    """Seeds of different shapes, a best γ inside the swept range, and two baselines: each fall is the seed's
+    own (largest γ − best γ of the mean) / best, Welch's unequal-variance p as scipy gives it, Holm over the two."""
+    import beyond_report
+    from scipy import stats
+
+    returns = {  # per eval γ at 1M, seeds 1–4
+        "pgg_g1to1.2": {1.0: [1000, 1100, 900, 1000], 1.2: [2000, 2200, 1900, 2100], 1.5: [1500, 1300, 1700, 1400]},
+        "ppo": {1.0: [2000, 2100, 1900, 2050], 1.2: [1500, 1600, 1400, 1500], 1.5: [800, 1000, 700, 900]},
+        "pgg_g1.1": {1.0: [1800, 1700, 1900, 1750], 1.2: [2100, 2000, 2300, 2050], 1.5: [1900, 1500, 2200, 1600]},
+    }
+    means = {("Hopper-v4", v, 1_000_000, g): dict(enumerate(values, start=1))
+             for v, by_gamma in returns.items() for g, values in by_gamma.items()}  # fmt: skip
+    rows = beyond_report.fall_tests(means, {"Hopper-v4": ["ppo", "pgg_g1.1", "pgg_g1to1.2"]})
+    falls = {v: [(worst - best) / best for best, worst in zip(r[1.2 if v != "ppo" else 1.0], r[1.5])]
+             for v, r in returns.items()}  # fmt: skip
+    p = [stats.ttest_ind(falls["pgg_g1to1.2"], falls[b], equal_var=False).pvalue for b in ("ppo", "pgg_g1.1")]
+    assert [(r["baseline"], r["best"], r["baseline_best"]) for r in rows] == [("ppo", 1.2, 1.0), ("pgg_g1.1", 1.2, 1.2)]
+    assert [r["fall"] for r in rows] == pytest.approx([np.mean(falls["pgg_g1to1.2"])] * 2)
+    assert [r["baseline_fall"] for r in rows] == pytest.approx([np.mean(falls["ppo"]), np.mean(falls["pgg_g1.1"])])
+    assert [r["p"] for r in rows] == pytest.approx(p)
+    assert [r["p_holm"] for r in rows] == pytest.approx([min(1, 2 * min(p)) if x == min(p) else max(min(1, 2 * min(p)), x)
+                                                         for x in p])  # fmt: skip
+    assert beyond_report.collapsed({(1_000_000, 1.0): {1: -40.0}, (200_000, 1.0): {1: -60.0}}) is None  # costs
 
 
 def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
@@ -283,3 +314,30 @@ def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observati
     for t in range(50):
         obs, *_ = env.step(policy.act(obs[None], np.array([1.5]), noise[t : t + 1], False)[0])
     assert distance == pytest.approx(np.linalg.norm(obs[8:11])) and total < 0
+
+
+def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
+    """results/beyond/report.md and report.csv regenerate from the committed CSVs alone: a changed script or CSV
+    whose report was not rewritten fails here. Floats are compared to 1e-9 (another CPU may round a sum
+    differently); the report's rounded text exactly, but for its line naming the folder."""
+    import beyond_report
+
+    beyond = ROOT / "results" / "beyond"
+    for path in [*beyond.glob("*/episodes.csv"), *beyond.glob("*/heldout_gamma.csv"), *beyond.glob("*.csv")]:
+        (tmp_path / path.relative_to(beyond)).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / path.relative_to(beyond)).write_bytes(path.read_bytes())
+    continuous = ROOT / "results" / "continuous"
+    beyond_report.report(beyond_report.Args(folder=str(tmp_path), table=str(continuous / "episodes.csv"),
+                                            table_heldout=str(continuous / "heldout_gamma.csv")))  # fmt: skip
+    ours, committed = ((folder / "report.md").read_text().splitlines() for folder in (tmp_path, beyond))
+    assert [line for line in ours if not line.startswith("Generated by")] == [
+        line for line in committed if not line.startswith("Generated by")
+    ]
+    with open(tmp_path / "report.csv", newline="") as f, open(beyond / "report.csv", newline="") as g:
+        for mine, theirs in zip(csv.DictReader(f), csv.DictReader(g), strict=True):
+            assert mine.keys() == theirs.keys()
+            for key in mine:
+                try:
+                    assert float(mine[key]) == pytest.approx(float(theirs[key]), rel=1e-9, nan_ok=True)
+                except ValueError:
+                    assert mine[key] == theirs[key]
