@@ -20,23 +20,34 @@ stack a cell's rows are bit-identical whether it is swept alone, beside other γ
 or after a resume; across machines they are statistically equal, not identical (benchmarks/README.md,
 "Exactness of the sweep").
 
-Configurations. A cell's seeds must be distinct runs of one training configuration. Every row
-carries `config` (config_label: the variant and every training argument that differs from the frozen
-reference, pgg_utils.paper.REFERENCE_ARGS, e.g. `pgg_g1.1 learning_rate=0.002`), summaries are
-grouped by it, and two checkpoints of one env, configuration, seed and step are an error naming both.
-Checkpoints whose model holds a NaN or an infinity are skipped (skipped.csv), never evaluated.
+Which code evaluates. A checkpoint is evaluated by the script that trained it, as CleanRL's evaluation
+takes `Agent` from the file that trained it: the repository's file the checkpoint names (the two
+scripts, or a fork copied beside them), or a file given with --script of that name (a fork kept
+elsewhere, a copy). A checkpoint never makes the sweep run code from anywhere else: one whose script
+cannot be found, or whose `Agent` cannot load its weights, is skipped with one line (skipped.csv).
+evaluated_by.csv names the file that evaluated each checkpoint and whether it is the one that trained
+it (same_script: yes, no, or unknown for checkpoints from before scripts recorded their own sha1).
+
+Configurations. A cell's seeds must be distinct runs of one training configuration: the script and
+every training argument (pgg_utils.identity.config_label). Every row carries `config`, its label: the
+variant, the script where it is not the repository's own, and every training argument that differs
+from the script's defaults, e.g. `pgg_g1.1 learning_rate=0.002` or `pgg_g1.1 script=ppo_pgg_relu.py`;
+summaries are grouped by it, and two checkpoints of one env, configuration, seed and step are an error
+naming both. Checkpoints whose model holds a NaN or an infinity are skipped, never evaluated.
 
 Outputs (in --output, locked against a second sweep while this one runs): cells/*.csv, one per
 finished (checkpoint, γ) cell, written atomically and named by the bytes of the checkpoint that were
-evaluated, the γ, the settings and the evaluation stack (the mujoco, gymnasium, numpy and torch
-versions, recorded in every row). A rerun reuses a cell only if it is whole and every row's checksum
-holds, so an interrupted sweep (Ctrl-C: exit status 130) loses only the cells in flight, and a
-damaged cell is evaluated again. Then episodes.csv (every episode of the requested cells, sorted) and
-summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean return, and
-its 95% confidence interval, see `mean_ci95`).
+evaluated, the γ, the settings, the evaluation stack (the mujoco, gymnasium, numpy and torch versions,
+recorded in every row) and the evaluating code (the script's sha1 and a custom task's). A rerun reuses
+a cell only if it is whole and every row's checksum holds, so an interrupted sweep (Ctrl-C: exit
+status 130) loses only the cells in flight, a damaged cell is evaluated again, and so is every cell
+after an edit to the script or the task. Then episodes.csv (every episode of the requested cells,
+sorted), summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean
+return, and its 95% confidence interval, see `mean_ci95`), skipped.csv and evaluated_by.csv.
 """
 
 import hashlib
+import inspect
 import io
 import multiprocessing
 import os
@@ -46,7 +57,7 @@ import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -55,10 +66,8 @@ import numpy as np
 import torch
 import tyro
 
-import ppo_pgg_continuous
-import ppo_pgg_discrete
-from pgg_utils import runs
-from pgg_utils.arguments import guidance_error
+from pgg_utils import runs, scripts
+from pgg_utils.arguments import DEFAULT_GAMMAS, guidance_error
 from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
 from pgg_utils.fast import MIN_FORWARD_ROWS
 from pgg_utils.files import (
@@ -70,11 +79,10 @@ from pgg_utils.files import (
     one_line_errors,
     write_csv_atomic,
 )
-from pgg_utils.identity import config_label, run_identity
-from pgg_utils.paper import PAPER_GAMMAS
+from pgg_utils.identity import configuration, configuration_fields
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
-from pgg_utils.seeds import check_one_run_per_seed
+from pgg_utils.seeds import cell_of, check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 from pgg_utils.video import labelled, write_video
 
@@ -110,14 +118,13 @@ class Args:
     """resamples for --ci bootstrap"""
     video: str | None = None
     """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder: gamma_<γ>.mp4 and side_by_side.mp4, all from the same episode seed (needs the [video] extra); None: sweep"""
+    script: tuple[str, ...] = ()
+    """training scripts to evaluate with besides the repository's: a checkpoint is evaluated by the one of its training script's file name (a fork kept outside the repository, or a copy of a script); () : the repository's only"""
     video_episode: int = 0
     """with --video: the episode to record, k (reset seed eval_seed + k and the action noise of a sweep cell's episode k)"""
 
 
 # --- checkpoints ----------------------------------------------------------------------------------
-
-
-TRAINING_MODULES = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
 
 
 def read_checkpoint(path: Path) -> tuple[str, dict]:
@@ -130,17 +137,19 @@ def read_checkpoint(path: Path) -> tuple[str, dict]:
     except OSError as e:
         raise ValueError(f"unreadable checkpoint ({e.strerror or e})") from None
     ckpt = runs.read_checkpoint_file(io.BytesIO(data))
-    if TRAINING_MODULES.get(ckpt.get("action_space")) is None:
+    if ckpt.get("action_space") not in scripts.ORIGINALS:
         raise ValueError("not a PGG checkpoint (no known action_space field)")
     if bad := runs.non_finite(ckpt["model"]):
         raise ValueError(f"non-finite weights or statistics ({', '.join(bad[:3])}); not evaluated")
     return hashlib.sha1(data).hexdigest(), ckpt
 
 
-def load_any_checkpoint(path: Path):
-    """(agent, checkpoint dict) from a file of either training script; ValueError if it is neither."""
+def load_any_checkpoint(path: Path, given: tuple[Path, ...] = ()):
+    """(agent, checkpoint dict) from a checkpoint file, the agent built by the script that trained it
+    (scripts.load_agent: the repository's, or the one of `given` of its name); ValueError if it is not
+    a checkpoint of a training script, or that script cannot be found or load it."""
     _, ckpt = read_checkpoint(path)
-    return TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, path), ckpt
+    return scripts.load_agent(ckpt, path, given)[0], ckpt
 
 
 class GuidedPolicy:
@@ -150,7 +159,7 @@ class GuidedPolicy:
     unconditional branch depends on the observation and `act` computes it per row."""
 
     def __init__(self, agent, ckpt: dict, uniform_null: bool = False):
-        self.agent, self.kind = agent, ckpt["action_space"]
+        self.agent, self.kind, self.env_id = agent, ckpt["action_space"], ckpt["env_id"]
         with torch.no_grad():
             if self.kind == "discrete":
                 learned = agent.unconditional_logits().numpy()
@@ -163,6 +172,10 @@ class GuidedPolicy:
         per observation, used unless deterministic."""
         return self.agent.act(raw_obs, guidance, deterministic, noise, **self.null)
 
+    def make_env(self):
+        """An evaluation env of the checkpoint's task, made as the script that defines the agent makes it."""
+        return inspect.getmodule(type(self.agent)).make_env(self.env_id)()
+
 
 def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
     """The action noise of one evaluation episode, (horizon, action_size) float32; the same for every
@@ -174,10 +187,6 @@ def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_
         uniform = rng.uniform(np.finfo(np.float32).tiny, 1.0, size=(horizon, action_size))
         return (-np.log(-np.log(uniform))).astype(np.float32)
     return rng.standard_normal(size=(horizon, action_size)).astype(np.float32)
-
-
-def make_eval_env(ckpt: dict):
-    return TRAINING_MODULES[ckpt["action_space"]].make_env(ckpt["env_id"])()
 
 
 def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
@@ -199,7 +208,7 @@ def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_
     so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the first
     step to the last: what a cell computes is a function of the checkpoint, γ and the settings alone
     (the module docstring's Exactness)."""
-    envs = [make_eval_env(ckpt) for _ in range(episodes)]
+    envs = [policy.make_env() for _ in range(episodes)]
     horizon, action_size = horizon_and_action_size(envs[0], ckpt)
     # (horizon, episodes, action_size): the noise of time step t is one contiguous block.
     noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)], axis=1)
@@ -235,7 +244,7 @@ def evaluate_sequential(policy: GuidedPolicy, ckpt, gamma, episodes, eval_seed, 
     """Reference: one environment, one episode after another, one observation per forward.
     Same seeds and noise as evaluate_cell; used by the tests and the benchmark. It agrees with the
     cells to rounding, not necessarily to the bit (see the module docstring)."""
-    env = make_eval_env(ckpt)
+    env = policy.make_env()
     episodes_played = [play_episode(env, policy, ckpt, gamma, eval_seed, k, deterministic) for k in range(episodes)]
     returns, lengths = zip(*episodes_played)
     env.close()
@@ -269,6 +278,8 @@ class Job:
     gamma: float
     settings: tuple  # (episodes, eval_seed, deterministic, uniform_null)
     stack: tuple  # evaluation_stack() of the sweep
+    script: Path  # the training script that evaluates the checkpoint (scripts.locate)
+    evaluator: str  # what else computes the cell: that script's sha1 and a custom task's code (evaluator_of)
 
 
 @dataclass
@@ -291,21 +302,20 @@ def run_job(job: Job) -> JobResult:
     episodes, eval_seed, deterministic, uniform_null = job.settings
     try:
         digest, ckpt = read_checkpoint(job.checkpoint)
-        agent = TRAINING_MODULES[ckpt["action_space"]].agent_from_checkpoint(ckpt, job.checkpoint)
-        config = config_label(ckpt)
+        agent, module, _ = scripts.load_agent(ckpt, job.checkpoint, (job.script,))
+        fields = configuration_fields(ckpt, asdict(module.Args()))
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
     returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
-    identity = run_identity(ckpt["args"], ckpt["action_space"])
     common = {
         "env_id": ckpt["env_id"],
-        "variant": identity.variant,
-        "config": config,
+        "variant": fields["variant"],
+        "config": fields["config"],
         "run": job.checkpoint.parent.parent.name,
         "seed": ckpt["args"]["seed"],
-        "train_guidance": identity.train_guidance,
-        "cond_dropout": identity.cond_dropout,
+        "train_guidance": fields["train_guidance"],
+        "cond_dropout": fields["cond_dropout"],
         "step": ckpt["step_mark"],
         "global_step": ckpt["global_step"],
         "eval_guidance": job.gamma,
@@ -324,22 +334,14 @@ def run_job(job: Job) -> JobResult:
 GROUP_COLUMNS = SUMMARY_COLUMNS[:9]  # a summary row per (env, variant, config, ..., γ, policy, null branch)
 
 
-def config_of(row: dict) -> str:
-    """A row's configuration; rows of sweeps from before the config column count as their variant's
-    default configuration."""
-    return str(row.get("config") or row["variant"])
-
-
 def summarise(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_000) -> list[dict]:
     """One row per (env, variant, config, step, γ, policy, null branch): statistics over seeds of the
     per-seed mean episodic return. A seed must be one run: InputError where two runs (the `run`
     column) give the same seed of one group, or one run gives the same episode twice."""
-    configuration = lambda row: (row["env_id"], row["variant"], config_of(row))
-    cell = lambda row: (row["step"], row["eval_guidance"], row["policy"], row["null_branch"])
-    check_one_run_per_seed(rows, configuration, cell)
+    check_one_run_per_seed(rows, configuration, cell_of)
     per_seed = defaultdict(lambda: defaultdict(list))
     for row in rows:
-        key = tuple(config_of(row) if c == "config" else str(row[c]) for c in GROUP_COLUMNS)
+        key = tuple(configuration(row)[2] if c == "config" else str(row[c]) for c in GROUP_COLUMNS)
         per_seed[key][str(row["seed"])].append(float(row["return"]))
     out = []
     for key in sorted(per_seed, key=lambda k: (k[0], k[1], k[2], int(k[5]), float(k[6]), k[7], k[8])):
@@ -355,7 +357,7 @@ def summarise(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_0
 
 
 def episode_sort_key(row: dict):
-    return (row["env_id"], row["variant"], config_of(row), row["run"], int(row["step"]), float(row["eval_guidance"]),
+    return (row["env_id"], row["variant"], configuration(row)[2], row["run"], int(row["step"]), float(row["eval_guidance"]),
             row["policy"], row["null_branch"], int(row["episode"]))  # fmt: skip
 
 
@@ -441,20 +443,70 @@ def how_workers_died(processes: dict) -> str:
                                       else f"exited with status {code}") for pid, code in ended) or "a worker ended"  # fmt: skip
 
 
-def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skipped: list[str]) -> tuple[dict, dict]:
-    """({(checkpoint, γ): cell path} of every cell the sweep asks for, {checkpoint: config label}).
-    Reads each checkpoint once; unreadable ones and those with non-finite models go to `skipped`.
-    InputError if two checkpoints are the same experiment, seed and step (two runs that would count
-    as one seed)."""
-    settings, cells, experiments, labels = settings_of(args), {}, {}, {}
+EVALUATED_BY_COLUMNS = [
+    "run",
+    "step",
+    "env_id",
+    "config",
+    "trained_by",
+    "evaluated_by",
+    "evaluated_by_sha1",
+    "same_script",
+]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """How a checkpoint is evaluated: by which script file, and the fingerprint of the code that computes
+    its cells (part of each cell's identity), with the row evaluated_by.csv gets."""
+
+    script: Path
+    evaluator: str
+    record: dict
+
+
+def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_code: dict) -> tuple[Evaluation, dict]:
+    """(Evaluation, the script's Args defaults) of a checkpoint, by the script that trained it. The
+    evaluator fingerprint is that script's sha1 and the sha1 of a custom task's code (scripts.task_sources;
+    gymnasium's own tasks are named by its version in the stack), so an edit to either re-evaluates the
+    cells. `task_code` caches the task's code by (script, env). ValueError (one line) where the script
+    cannot be found or load the checkpoint, or the task cannot be made."""
+    _, module, script = scripts.load_agent(ckpt, checkpoint, given)  # proves its Agent holds the weights, once
+    key = (script, ckpt["env_id"])
+    if key not in task_code:
+        try:
+            env = module.make_env(ckpt["env_id"])()
+        except Exception as e:  # a custom task's module gone, an id no longer registered: whatever make raises
+            raise ValueError(f"cannot make environment {ckpt['env_id']!r} ({type(e).__name__}: "
+                             f"{str(e).splitlines()[0] if str(e) else ''})") from None  # fmt: skip
+        task_code[key] = scripts.task_sources(ckpt["env_id"], env)
+        env.close()
+    script_sha1 = scripts.file_sha1(script)
+    trained_sha1 = ckpt.get("code", {}).get("script_sha1")
+    same = "unknown" if trained_sha1 is None else "yes" if trained_sha1 == script_sha1 else "no"
+    evaluator = "|".join([script_sha1, *(f"{file}={sha1}" for file, sha1 in sorted(task_code[key].items()))])
+    record = {"run": checkpoint.parent.parent.name, "step": ckpt["step_mark"], "env_id": ckpt["env_id"],
+              "trained_by": scripts.script_name(ckpt), "evaluated_by": scripts.recorded_path(script),
+              "evaluated_by_sha1": script_sha1, "same_script": same}  # fmt: skip
+    return Evaluation(script, evaluator, record), asdict(module.Args())
+
+
+def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skipped: list[str]):
+    """({(checkpoint, γ): cell path} of every cell the sweep asks for, {checkpoint: config label},
+    {checkpoint: Evaluation}). Reads each checkpoint once; unreadable ones, those with non-finite models
+    and those whose script cannot be found or load them go to `skipped`. InputError if two checkpoints
+    are the same experiment, seed and step (two runs that would count as one seed)."""
+    settings, cells, experiments, labels, evaluations = settings_of(args), {}, {}, {}, {}
+    given, task_code = tuple(Path(path).resolve() for path in args.script), {}
     for checkpoint in checkpoints:
         try:
             digest, ckpt = read_checkpoint(checkpoint)
-            run = run_identity(ckpt["args"], ckpt["action_space"])
-            identity = (ckpt["env_id"], config_label(ckpt), run.train_guidance, run.cond_dropout, ckpt["args"]["seed"],
-                        ckpt["step_mark"])  # fmt: skip
+            evaluation, defaults = evaluation_of(checkpoint, ckpt, given, task_code)
+            fields = configuration_fields(ckpt, defaults)
+            identity = (ckpt["env_id"], fields["config"], fields["train_guidance"], fields["cond_dropout"],
+                        ckpt["args"]["seed"], ckpt["step_mark"])  # fmt: skip
             kind = ckpt["action_space"]
-        except ValueError as e:  # read_checkpoint's: unreadable, not a checkpoint of these scripts, non-finite
+        except ValueError as e:  # unreadable, not a checkpoint of these scripts, non-finite, no script or task
             skipped.append(f"{checkpoint}: {e}")
             continue
         except Exception as e:
@@ -469,10 +521,11 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
                 f"{other} and {checkpoint} are two runs of one experiment ({identity[0]}, {identity[1]!r}, seed "
                 f"{identity[4]}, step {identity[5]}) and would count as one seed; sweep them separately or remove one"
             )
-        labels[checkpoint] = identity[1]
-        for gamma in dict.fromkeys(args.gammas if args.gammas is not None else PAPER_GAMMAS[kind]):
-            cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest, stack)
-    return cells, labels
+        labels[checkpoint], evaluations[checkpoint] = identity[1], evaluation
+        for gamma in dict.fromkeys(args.gammas if args.gammas is not None else DEFAULT_GAMMAS[kind]):
+            cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest, stack,
+                                                   evaluation.evaluator)  # fmt: skip
+    return cells, labels, evaluations
 
 
 def sweep(args: Args) -> Path:
@@ -491,7 +544,7 @@ def sweep(args: Args) -> Path:
 
 def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
     skipped, stack = [], evaluation_stack()
-    cells, labels = plan(args, checkpoints, output, stack, skipped)
+    cells, labels, evaluations = plan(args, checkpoints, output, stack, skipped)
     finished = {}  # (checkpoint, γ) -> its rows, as read back from its cell file or written to it
     try:
         for cell, path in cells.items():
@@ -501,7 +554,7 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
                 except ValueError as e:
                     print(f"re-evaluating {path}: {e}", file=sys.stderr)
         print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {len(finished)} already done", file=sys.stderr)
-        changed = evaluate_missing(args, output, stack, cells, finished, skipped)
+        changed = evaluate_missing(args, output, stack, cells, finished, skipped, evaluations)
         for checkpoint in sorted(changed):
             skipped.append(f"{checkpoint}: rewritten during the sweep; rerun the sweep to evaluate its new contents")
         rows = []
@@ -515,6 +568,8 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
         write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
         write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
         write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
+        evaluated = [evaluations[c].record | {"config": labels[c]} for c in sorted(evaluations) if c not in changed]
+        write_csv_atomic(output / "evaluated_by.csv", EVALUATED_BY_COLUMNS, evaluated)
     except KeyboardInterrupt:
         raise SweepInterrupted(
             f"{len(finished)} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "
@@ -525,6 +580,9 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
                          "rerun the same command to evaluate the rest") from None  # fmt: skip
     for reason in skipped:
         print(f"skipped {reason}", file=sys.stderr)
+    for run, script in sorted({(r["run"], r["evaluated_by"]) for r in evaluated if r["same_script"] == "no"}):
+        print(f"note: {run} was evaluated by {script}, which differs from the file that trained it "
+              f"({output / 'evaluated_by.csv'})", file=sys.stderr)  # fmt: skip
     listed = f"; skipped {len(skipped)} checkpoint(s), listed in {output / 'skipped.csv'}" if skipped else ""
     wrote = f"{output / 'episodes.csv'} ({len(rows)} episodes), {output / 'summary.csv'} ({len(summary)} rows)"
     print(f"wrote {wrote}{listed}")
@@ -533,13 +591,14 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
     return output
 
 
-def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finished: dict,
-                     skipped: list[str]) -> set[Path]:  # fmt: skip
+def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finished: dict, skipped: list[str],
+                     evaluations: dict) -> set[Path]:  # fmt: skip
     """Evaluates the cells not in `finished`, writing each as it finishes and adding its rows to
     `finished`; returns the checkpoints whose bytes changed since `cells` was planned."""
     settings = settings_of(args)
     missing = [cell for cell in cells if cell not in finished]
-    jobs = [Job(checkpoint, gamma, settings, stack) for checkpoint, gamma in missing]
+    jobs = [Job(checkpoint, gamma, settings, stack, evaluations[checkpoint].script, evaluations[checkpoint].evaluator)
+            for checkpoint, gamma in missing]  # fmt: skip
     if not jobs:
         return set()
     progress = Progress(label="sweep", total=len(jobs), unit="cells", interval=0, stream=sys.stderr)
@@ -557,7 +616,7 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
             else:
                 # Named by the bytes that were evaluated. A checkpoint rewritten since the plan keeps its new
                 # cell for a later sweep; this sweep reports none of its cells (they could mix two files).
-                path = cell_path(output, job.checkpoint, job.gamma, settings, result.digest, stack)
+                path = cell_path(output, job.checkpoint, job.gamma, settings, result.digest, stack, job.evaluator)
                 rows = write_cell(path, result.rows)
                 if path == cells[(job.checkpoint, job.gamma)]:
                     finished[(job.checkpoint, job.gamma)] = rows
@@ -603,7 +662,7 @@ def record_videos(args: Args) -> list[Path]:
         raise InputError(f"--video records one checkpoint; {len(checkpoints)} found "
                          "(name a checkpoint file, or narrow with --steps)")  # fmt: skip
     try:
-        agent, ckpt = load_any_checkpoint(checkpoints[0])
+        agent, ckpt = load_any_checkpoint(checkpoints[0], tuple(Path(path).resolve() for path in args.script))
     except ValueError as e:
         raise InputError(f"{checkpoints[0]}: {e}") from None
     try:
@@ -618,7 +677,7 @@ def record_videos(args: Args) -> list[Path]:
     policy = GuidedPolicy(agent, ckpt, args.uniform_null)
     output = Path(args.video)
     output.mkdir(parents=True, exist_ok=True)
-    gammas = args.gammas if args.gammas is not None else PAPER_GAMMAS[ckpt["action_space"]]
+    gammas = args.gammas if args.gammas is not None else DEFAULT_GAMMAS[ckpt["action_space"]]
     written, panels = [], []
     for gamma in gammas:
         frames, total = record_episode(policy, ckpt, gamma, args.eval_seed, args.video_episode, args.deterministic)

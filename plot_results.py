@@ -82,9 +82,9 @@ from pgg_utils.agreement import (
 from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.figures import cell_index, ordered_series
 from pgg_utils.files import MANIFEST, InputError, read_csv, read_manifest, remove_stale, write_atomic, write_manifest
-from pgg_utils.identity import variant_id
-from pgg_utils.paper import PAPER_ENVS, action_kind, is_mujoco, paper_name, variant_rank
-from pgg_utils.seeds import check_one_run_per_seed
+from pgg_utils.identity import configuration, is_mujoco, variant_id
+from pgg_utils.paper import PAPER_ENVS, action_kind, paper_name, variant_rank
+from pgg_utils.seeds import cell_of, check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
 
 ROOT = Path(__file__).resolve().parent
@@ -248,16 +248,9 @@ def check_one_kind(rows: list[dict]) -> None:
             )
 
 
-def configuration(row: dict) -> tuple:
-    """(env, variant, config, training guidance, dropout): a row's whole configuration, exactly. The
-    variant and config label alone round guidance and dropout to 6 digits (variant_id's %g)."""
-    return (row["env_id"], row["variant"], row["config"], float(row["train_guidance"]), float(row["cond_dropout"]))
-
-
 def check_not_pooled(rows: list[dict]) -> None:
     """A cell's seeds must be distinct runs of one configuration, and each episode must be counted once."""
-    cell = lambda row: (row["step"], row["eval_guidance"], row["policy"], row["null_branch"])
-    check_one_run_per_seed(rows, configuration, cell, source=lambda row: row["_source"])
+    check_one_run_per_seed(rows, configuration, cell_of, source=lambda row: row["_source"])
 
 
 def select_mode(rows: list[dict], policy: str, null_branch: str) -> list[dict]:

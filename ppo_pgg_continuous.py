@@ -40,7 +40,7 @@ from pgg_utils.fast import (
     guidance_coefficients,  # PGG
     numpy_network,
 )
-from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
+from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
 
 ACTION_SPACE = "continuous"  # the checkpoints' kind; the sweep picks this script by it
 LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
@@ -520,6 +520,18 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     }
 
 
+def flatten_rollout(buf: Rollout, advantages, returns) -> dict[str, torch.Tensor]:
+    """The rollout as one batch of rows, the layout `minibatch_loss` reads."""
+    return {
+        "obs": buf.obs.reshape(-1, buf.obs.shape[-1]),
+        "actions": buf.actions.reshape(-1, buf.actions.shape[-1]),
+        "logprobs": buf.logprobs.reshape(-1),
+        "advantages": advantages.reshape(-1),
+        "returns": returns.reshape(-1),
+        "values": buf.values.reshape(-1),
+    }
+
+
 def ppo_update(
     agent,
     optimizer,
@@ -531,14 +543,7 @@ def ppo_update(
     loss_fn=minibatch_loss,
 ) -> dict[str, float]:
     """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
-    batch = {
-        "obs": buf.obs.reshape(-1, buf.obs.shape[-1]),
-        "actions": buf.actions.reshape(-1, buf.actions.shape[-1]),
-        "logprobs": buf.logprobs.reshape(-1),
-        "advantages": advantages.reshape(-1),
-        "returns": returns.reshape(-1),
-        "values": buf.values.reshape(-1),
-    }
+    batch = flatten_rollout(buf, advantages, returns)
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.num_minibatches
 
@@ -603,11 +608,15 @@ def train(args: Args, run: runs.Run) -> None:
     )
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
-    # Without guidance or dropout at any iteration the null embedding is outside the objective: its
-    # all-zero gradient in the flat buffer would still change the clipping norm's rounding; without it
-    # the run is PPO's bits.
+    # The null embedding trains wherever the objective reads it: guidance or dropout at some iteration,
+    # or any other term of the loss (probed on an empty rollout, with PPO's own actor pass). Outside it,
+    # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
+    # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
-    trained = [p for name, p in agent.named_parameters() if guided or name != "null_obs"]  # PGG
+    probe = flatten_rollout(Rollout.empty(2, 1, obs_dim, action_dim), torch.zeros(2), torch.zeros(2))  # PGG
+    probe_loss, _ = minibatch_loss(agent, probe, torch.arange(2), None, None, args)  # PGG
+    trains_null = guided or reads_parameter(probe_loss, agent.null_obs)  # PGG
+    trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
     # One fused kernel for the loss and one for its backward, in place of ~200 small ops.
@@ -679,7 +688,7 @@ def checkpoint_shapes(envs) -> dict:
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    runs.require_kind(ckpt, ACTION_SPACE, source)
+    runs.require_own(ckpt, ACTION_SPACE, __file__, source)
     low, high = runs.action_bounds(ckpt)
     agent = make_agent(ckpt["args"], {**ckpt, "action_low": low, "action_high": high})
     agent.load_state_dict(ckpt["model"])

@@ -35,9 +35,7 @@ import tyro
 
 import eval_gamma_sweep
 import plot_results
-import ppo_pgg_continuous
-import ppo_pgg_discrete
-from pgg_utils import paper, processes, runs
+from pgg_utils import paper, processes, runs, scripts
 from pgg_utils.arguments import guidance_error
 from pgg_utils.files import (
     InputError,
@@ -51,8 +49,6 @@ from pgg_utils.files import (
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
-SCRIPTS = {"discrete": ROOT / "ppo_pgg_discrete.py", "continuous": ROOT / "ppo_pgg_continuous.py"}
-TRAINING_MODULES = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
 
 
 @dataclass(frozen=True)
@@ -164,7 +160,8 @@ def argument_error(args: Args) -> str | None:
                 paper.variant_flags(variant, env_id)
             except ValueError as e:
                 return f"--variants: {e}"
-        batch = paper.REFERENCE_ARGS[kind]["num_envs"] * paper.REFERENCE_ARGS[kind]["num_steps"]
+        defaults = scripts.original(kind).Args()
+        batch = defaults.num_envs * defaults.num_steps
         if chosen.checkpoint_interval is not None and chosen.checkpoint_interval < batch:
             return (f"--checkpoint-interval must be at least one batch of {env_id}'s training script, "
                     f"num_envs * num_steps = {batch}, got {chosen.checkpoint_interval}")  # fmt: skip
@@ -192,7 +189,7 @@ class RunSpec:
     @property
     def final_checkpoint(self) -> Path:
         kind = paper.action_kind(self.env_id)
-        total = paper.REFERENCE_ARGS[kind]["total_timesteps"] if self.total_timesteps is None else self.total_timesteps
+        total = scripts.original(kind).Args().total_timesteps if self.total_timesteps is None else self.total_timesteps
         return runs.checkpoint_path(self.run_dir, total)
 
     @property
@@ -205,7 +202,7 @@ class RunSpec:
         return None if latest is None else runs.checkpoint_step(latest)
 
     def command(self) -> list[str]:
-        cmd = [sys.executable, str(SCRIPTS[paper.action_kind(self.env_id)]), "--env-id", self.env_id,
+        cmd = [sys.executable, scripts.original(paper.action_kind(self.env_id)).__file__, "--env-id", self.env_id,
                "--seed", str(self.seed), *paper.variant_flags(self.variant, self.env_id),
                "--output-dir", self.root, "--run-name", self.name, "--torch-threads", "1"]  # fmt: skip
         if self.total_timesteps is not None:
@@ -366,7 +363,7 @@ def other_arguments(spec: RunSpec) -> str | None:
         recorded = runs.read_checkpoint_file(latest).get("args", {})
     except ValueError:  # the sweep lists it in skipped.csv
         return None
-    module = TRAINING_MODULES[paper.action_kind(spec.env_id)]
+    module = scripts.original(paper.action_kind(spec.env_id))
     wanted = tyro.cli(module.Args, args=spec.command()[2:])  # the arguments the run's command gives it
     differing = runs.differing_arguments(recorded, asdict(wanted), asdict(module.Args()))
     return f"{spec.name} ({', '.join(differing)})" if differing else None

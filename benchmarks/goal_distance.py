@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 from pgg_utils import runs
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
-from pgg_utils.identity import run_identity
+from pgg_utils.identity import variant_id
 from pgg_utils.paper import PAPER_GAMMAS
 
 FINAL_DISTANCE = {
@@ -52,7 +52,7 @@ class Args:
 
 def final_distances(policy, ckpt: dict, gamma: float, episodes: int, eval_seed: int) -> list[tuple[float, float]]:
     """(return, final distance) of each episode of one cell."""
-    env = sweep.make_eval_env(ckpt)
+    env = policy.make_env()
     horizon, action_size = sweep.horizon_and_action_size(env, ckpt)
     out = []
     for k in range(episodes):
@@ -80,11 +80,11 @@ def main() -> None:
             agent, ckpt = sweep.load_any_checkpoint(path)
             if ckpt["env_id"] not in args.envs:
                 continue
-            identity, policy = run_identity(ckpt["args"], ckpt["action_space"]), sweep.GuidedPolicy(agent, ckpt)
+            variant, policy = variant_id(ckpt["args"]), sweep.GuidedPolicy(agent, ckpt)
             for gamma in args.gammas:
                 for k, (total, distance) in enumerate(final_distances(policy, ckpt, gamma, args.episodes,
                                                                       args.eval_seed)):  # fmt: skip
-                    rows.append({"env_id": ckpt["env_id"], "variant": identity.variant, "run": path.parent.parent.name,
+                    rows.append({"env_id": ckpt["env_id"], "variant": variant, "run": path.parent.parent.name,
                                  "seed": ckpt["args"]["seed"], "step": ckpt["step_mark"], "eval_guidance": gamma,
                                  "episode": k, "return": total, "final_distance": distance})  # fmt: skip
             print(f"{path}: {len(args.gammas)} γ values", file=sys.stderr)

@@ -7,6 +7,11 @@ from dataclasses import dataclass, fields
 from pgg_utils.guidance import SCHEDULES
 
 MAX_GUIDANCE = 1000.0
+# The γ values a sweep evaluates (--gammas) unless told otherwise: the paper's, by action space.
+DEFAULT_GAMMAS = {
+    "discrete": (1.0, 1.5, 2.0, 5.0, 10.0, 20.0),
+    "continuous": (1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.3, 1.5),
+}
 
 
 @dataclass

@@ -34,16 +34,15 @@ def evaluation_stack() -> tuple[str, ...]:
     return tuple(versions[package] or "none" for package in STACK_COLUMNS)
 
 
-def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple, digest: str | None = None,
-              stack: tuple | None = None) -> Path:  # fmt: skip
-    """One file per (checkpoint, γ, settings, evaluation stack). The checkpoint's bytes (`digest`,
-    their sha1; read from the file if not given), not its path or timestamp, are its identity: a
-    retrained run is never mistaken for the one evaluated before, and a run directory copied to
-    another machine or folder keeps its finished cells. The stack (this process's where not given)
-    is part of it too: a cell computed under another MuJoCo, gymnasium, numpy or torch is never reused."""
-    if digest is None:
-        digest = hashlib.sha1(Path(checkpoint).read_bytes()).hexdigest()
-    key = f"{digest}|{gamma!r}|{settings!r}|{stack or evaluation_stack()!r}|{EVALUATOR_REVISION}"
+def cell_path(output: Path, checkpoint: Path, gamma: float, settings: tuple, digest: str, stack: tuple,
+              evaluator: str) -> Path:  # fmt: skip
+    """One file per (checkpoint, γ, settings, evaluation stack, evaluating code). The checkpoint's bytes
+    (`digest`, their sha1), not its path or timestamp, are its identity: a retrained run is never
+    mistaken for the one evaluated before, and a run directory copied to another machine or folder
+    keeps its finished cells. The stack is part of it too: a cell computed under another MuJoCo,
+    gymnasium, numpy or torch is never reused; and so is `evaluator`, the sha1 of the training script
+    that evaluates it and of a custom task's code: a cell computed before either was edited is never reused."""
+    key = f"{digest}|{gamma!r}|{settings!r}|{stack!r}|{evaluator}|{EVALUATOR_REVISION}"
     name = hashlib.sha1(key.encode()).hexdigest()[:16]
     return output / "cells" / f"{checkpoint.parent.parent.name}__{checkpoint.stem}__g{gamma:g}__{name}.csv"
 

@@ -32,13 +32,28 @@ class GuidanceArgs:
 
 
 def uses_null_branch(args) -> bool:
-    """Whether the unconditional branch pi(.|null) is ever in the objective: guidance other than 1 at
-    some iteration, or conditioning dropout. When it is not, the null embedding is left out of the
-    optimizer and the actor runs PPO's own pass, so the run is PPO's to the bit."""
+    """Whether guidance puts the unconditional branch pi(.|null) in the objective: guidance other than 1
+    at some iteration, or conditioning dropout. When it does not, the actor runs PPO's own pass; the
+    null embedding then trains only where another term of the loss reads it (reads_parameter)."""
     if args.cond_dropout > 0 or args.guidance_schedule == "adaptive":
         return True
     final = args.guidance_final if args.guidance_schedule == "linear" else args.guidance
     return args.guidance != 1.0 or final != 1.0
+
+
+def reads_parameter(loss, parameter) -> bool:
+    """Whether the autograd graph of `loss` (a tensor) reaches `parameter`, a leaf: whether the objective
+    reads it at all, whatever its gradient's value. Walks the graph; computes nothing."""
+    seen, stack = set(), [loss.grad_fn]
+    while stack:
+        node = stack.pop()
+        if node is None or node in seen:
+            continue
+        seen.add(node)
+        if getattr(node, "variable", None) is parameter:  # AccumulateGrad: the leaf it accumulates into
+            return True
+        stack.extend(next_node for next_node, _ in node.next_functions)
+    return False
 
 
 class GuidanceSchedule:

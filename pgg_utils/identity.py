@@ -1,27 +1,47 @@
-"""A run's identity, from its training arguments alone: its variant id, the paper's name for it, the
-label of its configuration, its default run directory name, and the paper's table rows it is compared
-with (pgg_utils.agreement reads them from the variant through the same pgg_utils.paper.paper_rows). A
-new training argument is named in every label at once, or tests/test_extending.py says which table of
-pgg_utils.paper to extend."""
+"""A run's identity, once for training, the sweep, the tables and the learning curves: its variant id
+(from its PGG arguments), its default run directory name, and its configuration, the one key runs are
+pooled by: the training script plus every training argument except the run-only ones. The label that
+shows a configuration names the script where it is not the repository's own and every argument that
+differs from its default (CleanRL's, frozen; a script's own for an argument CleanRL lacks), so a new
+argument in a script's `Args` keeps its runs apart with no table to extend. Plain Python: nothing of the paper study."""
 
-from dataclasses import dataclass
+import functools
 
-from pgg_utils.paper import GOAL_DIMS, REFERENCE_ARGS, is_mujoco, paper_name, paper_rows
+from pgg_utils import scripts
+from pgg_utils.arguments import RUN_ONLY_ARGS
 
-# Arguments the variant id names; the configuration label lists the other training arguments that
-# differ from the frozen reference.
+# Arguments the variant id names; the configuration label lists the other training arguments.
 VARIANT_ARGS = frozenset({"guidance", "guidance_schedule", "guidance_final", "guidance_kl_target", "cond_dropout",
                           "null_dims"})  # fmt: skip
+# The observation dimensions of a task's goal, named `goal` in a variant (--null-dims), from gymnasium's
+# documentation of the v4 observations: Reacher's target position (4, 5) and fingertip-minus-target
+# vector (8, 9, 10); Pusher's goal position (20, 21, 22). Reacher draws its target anew each episode;
+# Pusher's goal is the same in every episode (gymnasium's PusherEnv), so its goal null is a control.
+GOAL_DIMS = {"Reacher-v4": (4, 5, 8, 9, 10), "Pusher-v4": (20, 21, 22)}
 
 
-@dataclass(frozen=True)
-class RunIdentity:
-    variant: str  # e.g. ppo, pgg_g1.1, pgg_drop0.1, pgg_g1to1.2, pgg_adaptive1.1_kl0.02, pgg_g1.1_goal
-    name: str  # the paper's name of the variant, or a readable one for variants the paper did not run
-    label: str  # the variant and every other training argument that differs from the frozen reference
-    train_guidance: float  # γ_train at the first iteration (constant throughout for the paper's variants)
-    cond_dropout: float
-    paper_rows: tuple[str, str] | None  # (method, γ_train) of the paper's table rows it is compared with
+# PGG's arguments at the values that train PPO (a constant γ_train of 1, the whole observation nulled).
+PPO_GUIDANCE = {"guidance": 1.0, "guidance_schedule": "constant", "guidance_final": None, "guidance_kl_target": None,
+                "guidance_bounds": (1.0, 1.5), "cond_dropout": 0.0}  # fmt: skip
+# The defaults labels are written against, by action space: CleanRL's for ppo.py and
+# ppo_continuous_action.py (its `gamma` is our `discount`), with PGG's arguments at PPO, which the two
+# training scripts' defaults equal (tests/test_extending.py). Frozen, as data: changing a script's
+# default neither renames nor splits an experiment already run. An argument they lack (a fork's) is
+# compared with its script's own default.
+FROZEN_DEFAULTS = {
+    "discrete": {
+        "total_timesteps": 500_000, "learning_rate": 2.5e-4, "num_envs": 4, "num_steps": 128, "anneal_lr": True,
+        "discount": 0.99, "gae_lambda": 0.95, "num_minibatches": 4, "update_epochs": 4, "norm_adv": True,
+        "clip_coef": 0.2, "clip_vloss": True, "ent_coef": 0.01, "vf_coef": 0.5, "max_grad_norm": 0.5,
+        "target_kl": None, **PPO_GUIDANCE,
+    },
+    "continuous": {
+        "total_timesteps": 1_000_000, "learning_rate": 3e-4, "num_envs": 1, "num_steps": 2048, "anneal_lr": True,
+        "discount": 0.99, "gae_lambda": 0.95, "num_minibatches": 32, "update_epochs": 10, "norm_adv": True,
+        "clip_coef": 0.2, "clip_vloss": True, "ent_coef": 0.0, "vf_coef": 0.5, "max_grad_norm": 0.5,
+        "target_kl": None, "obs_clip": 10.0, "reward_clip": 10.0, **PPO_GUIDANCE, "null_dims": None,
+    },
+}  # fmt: skip
 
 
 def guidance_part(args: dict) -> str:
@@ -47,7 +67,7 @@ def null_part(args: dict) -> str:
 
 def variant_id(args: dict) -> str:
     """`ppo`, `pgg_g1.1`, `pgg_drop0.1`, `pgg_g1.1_drop0.1`, `pgg_g1to1.2`, `pgg_g1.1_goal`, ...: a run's
-    variant from its PGG arguments (those an older checkpoint lacks at their reference values)."""
+    variant from its PGG arguments (those an older checkpoint lacks at their PPO values)."""
     guidance, dropout = guidance_part(args), float(args.get("cond_dropout", 0.0))
     parts = [] if guidance == "g1" else [guidance]
     parts += [f"drop{dropout:g}"] if dropout else []
@@ -55,13 +75,15 @@ def variant_id(args: dict) -> str:
     return "pgg_" + "_".join(parts) if parts else "ppo"
 
 
-def training_words(args: dict, kind: str) -> list[str]:
-    """`key=value` for every training argument outside the variant that differs from the frozen
-    reference of `kind`, sorted by name; those an older checkpoint lacks count as the reference's."""
-    reference, words = REFERENCE_ARGS[kind], []
-    for key in sorted(reference.keys() - VARIANT_ARGS):
-        value = args.get(key, reference[key])
-        if normalised(value) != normalised(reference[key]):
+def training_words(args: dict, kind: str, defaults: dict) -> list[str]:
+    """`key=value` for every training argument outside the variant that differs from its frozen default
+    (FROZEN_DEFAULTS of `kind`), or for an argument those lack, from the script's (`defaults`: asdict of
+    its Args()), sorted by name; one an older checkpoint lacks counts as the default, and one the script
+    no longer has is named with its value."""
+    defaults, words = {**defaults, **FROZEN_DEFAULTS.get(kind, {})}, []
+    for key in sorted((defaults.keys() | args.keys()) - RUN_ONLY_ARGS - VARIANT_ARGS - {"env_id", "seed"}):
+        value = args.get(key, defaults.get(key))
+        if key not in defaults or normalised(value) != normalised(defaults[key]):
             words.append(f"{key}={format_arg(value)}")
     return words
 
@@ -76,19 +98,6 @@ def format_arg(value) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def run_identity(args: dict, kind: str) -> RunIdentity:
-    """The identity of a run from its training arguments (a checkpoint's `args`, or `asdict(args)`)."""
-    variant, words = variant_id(args), training_words(args, kind)
-    return RunIdentity(
-        variant=variant,
-        name=paper_name(variant),
-        label=" ".join([variant, *words]),
-        train_guidance=float(args["guidance"]),
-        cond_dropout=float(args.get("cond_dropout", 0.0)),
-        paper_rows=paper_rows(variant),
-    )
-
-
 def run_name(args) -> str:
     """The default run directory name: `{env_id}__{exp_name}__g1.1__p0__s1`, with the schedule in place
     of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`) and `__goal` (or `__null4-5`) for partial null inputs."""
@@ -97,18 +106,51 @@ def run_name(args) -> str:
     return f"{args.env_id}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
 
 
-def config_label(ckpt: dict) -> str:
-    """The training configuration of a checkpoint, as a readable label: the run's identity label, then
-    `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint records
-    no package versions (format 1), so that it is never pooled with runs whose stack is known. Against
-    frozen data (REFERENCE_ARGS), not the training scripts' current defaults: changing a default
-    neither renames nor splits an experiment. Arguments the reference lacks (env_id, seed, how the run
-    was recorded) are left out, and so is the revision of the training code, which changes with every
-    commit. E.g. `pgg_g1.1 learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`."""
-    words = [run_identity({"env_id": ckpt["env_id"], **ckpt["args"]}, ckpt["action_space"]).label]
+def config_label(ckpt: dict, defaults: dict) -> str:
+    """A checkpoint's configuration as a label, the key every reader pools runs by: its variant,
+    `script=<file>` where a script other than the repository's own for its action space trained it,
+    every training argument that differs from its default (training_words; `defaults`: asdict of the
+    script's Args()),
+    then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint
+    records no package versions (format 1), so that it is never pooled with runs whose stack is known.
+    Left out: env_id and seed (a table's rows and columns) and the run-only arguments. E.g. `pgg_g1.1
+    learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`, `pgg_g1.1 script=ppo_pgg_relu.py`."""
+    args = {"env_id": ckpt["env_id"], **ckpt["args"]}
+    words = [variant_id(args)]
+    if not scripts.is_original(ckpt):
+        words.append(f"script={scripts.script_name(ckpt)}")
+    words += training_words(args, ckpt["action_space"], defaults)
     versions = ckpt.get("versions")
     if not versions:
         words.append("versions=unknown")
     elif versions.get("mujoco") and is_mujoco(ckpt["env_id"]):
         words.append(f"mujoco={versions['mujoco']}")
     return " ".join(words)
+
+
+def configuration_fields(ckpt: dict, defaults: dict) -> dict:
+    """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration`
+    reads them back): its variant, its config label, its γ_train (the first, for a schedule) and dropout."""
+    args = {"env_id": ckpt["env_id"], **ckpt["args"]}
+    return {"variant": variant_id(args), "config": config_label(ckpt, defaults),
+            "train_guidance": float(args["guidance"]), "cond_dropout": float(args.get("cond_dropout", 0.0))}  # fmt: skip
+
+
+def configuration(row: dict) -> tuple:
+    """(env, variant, config, training guidance, dropout) of a sweep's row: the configuration its seeds
+    pool over, exactly. The variant and config label alone round guidance and dropout to 6 digits
+    (variant_id's %g). Rows of sweeps from before the config column count as their variant's."""
+    config = str(row.get("config") or row["variant"])
+    return (row["env_id"], row["variant"], config, float(row["train_guidance"]), float(row["cond_dropout"]))
+
+
+@functools.cache
+def is_mujoco(env_id: str) -> bool:
+    """Whether the task runs on MuJoCo (its results then depend on the MuJoCo version)."""
+    import gymnasium as gym
+
+    try:
+        entry_point = gym.spec(env_id).entry_point
+    except gym.error.Error:
+        return False
+    return isinstance(entry_point, str) and entry_point.startswith("gymnasium.envs.mujoco")

@@ -3,21 +3,17 @@ defaults that name a configuration. Plain data and a few rules; no torch."""
 
 import functools
 
+from pgg_utils.arguments import DEFAULT_GAMMAS
+from pgg_utils.identity import GOAL_DIMS
+
 PAPER_ENVS = {
     "discrete": ("Acrobot-v1", "CartPole-v1"),
     "continuous": ("HalfCheetah-v4", "Hopper-v4", "Humanoid-v4", "InvertedPendulum-v4", "Pusher-v4", "Walker2d-v4"),
 }
-PAPER_GAMMAS = {
-    "discrete": (1.0, 1.5, 2.0, 5.0, 10.0, 20.0),
-    "continuous": (1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.3, 1.5),
-}
+# The sweep's default γ values are the paper's.
+PAPER_GAMMAS = DEFAULT_GAMMAS
 # Variant id -> (training guidance γ_train, conditioning dropout), in the paper's order.
 VARIANTS = {"ppo": (1.0, 0.0), "pgg_g1.1": (1.1, 0.0), "pgg_drop0.1": (1.0, 0.1)}
-# The observation dimensions a goal-conditioned null embedding replaces (--null-dims), from gymnasium's
-# documentation of the v4 observations: Reacher's target position (4, 5) and fingertip-minus-target
-# vector (8, 9, 10); Pusher's goal position (20, 21, 22). Reacher draws its target anew each episode;
-# Pusher's goal is the same in every episode (gymnasium's PusherEnv), so its goal null is a control.
-GOAL_DIMS = {"Reacher-v4": (4, 5, 8, 9, 10), "Pusher-v4": (20, 21, 22)}
 # Variants beyond the paper, the future work it names (scheduled and adaptive γ_train, guidance on a
 # goal), as the training flags that make them; "{goal}" stands for the task's GOAL_DIMS. Each id is the
 # one pgg_utils.identity gives a run of those flags (tests/test_extending.py).
@@ -61,28 +57,6 @@ def variant_flags(variant: str, env_id: str) -> list[str]:
 
 
 PAPER_SEEDS = 5  # the paper's "mean ± 95% CI" is over 5 seeds (see the README's "The statistic")
-
-# PGG's arguments at the values that train PPO (a constant γ_train of 1, the whole observation nulled).
-PGG_REFERENCE = {"guidance": 1.0, "guidance_schedule": "constant", "guidance_final": None, "guidance_kl_target": None,
-                 "guidance_bounds": (1.0, 1.5), "cond_dropout": 0.0}  # fmt: skip
-# The training arguments a configuration is named against (config_label): CleanRL's defaults for
-# ppo.py and ppo_continuous_action.py (its `gamma` is our `discount`), with our PGG arguments at PPO.
-# Frozen here, as data: changing a script's default neither renames nor splits an old experiment.
-# An argument added later belongs here at the value that trains as before it existed.
-REFERENCE_ARGS = {
-    "discrete": {
-        "total_timesteps": 500_000, "learning_rate": 2.5e-4, "num_envs": 4, "num_steps": 128, "anneal_lr": True,
-        "discount": 0.99, "gae_lambda": 0.95, "num_minibatches": 4, "update_epochs": 4, "norm_adv": True,
-        "clip_coef": 0.2, "clip_vloss": True, "ent_coef": 0.01, "vf_coef": 0.5, "max_grad_norm": 0.5,
-        "target_kl": None, **PGG_REFERENCE,
-    },
-    "continuous": {
-        "total_timesteps": 1_000_000, "learning_rate": 3e-4, "num_envs": 1, "num_steps": 2048, "anneal_lr": True,
-        "discount": 0.99, "gae_lambda": 0.95, "num_minibatches": 32, "update_epochs": 10, "norm_adv": True,
-        "clip_coef": 0.2, "clip_vloss": True, "ent_coef": 0.0, "vf_coef": 0.5, "max_grad_norm": 0.5,
-        "target_kl": None, "obs_clip": 10.0, "reward_clip": 10.0, **PGG_REFERENCE, "null_dims": None,
-    },
-}  # fmt: skip
 
 
 def paper_name(variant: str) -> str:
@@ -137,18 +111,6 @@ def action_kind(env_id: str) -> str:
     if isinstance(space, gym.spaces.Box):
         return "continuous"
     raise ValueError(f"{env_id} has a {type(space).__name__} action space; the scripts train Discrete or Box")
-
-
-@functools.cache
-def is_mujoco(env_id: str) -> bool:
-    """Whether the task runs on MuJoCo (its results then depend on the MuJoCo version)."""
-    import gymnasium as gym
-
-    try:
-        entry_point = gym.spec(env_id).entry_point
-    except gym.error.Error:
-        return False
-    return isinstance(entry_point, str) and entry_point.startswith("gymnasium.envs.mujoco")
 
 
 def variant_rank(variant: str) -> int:

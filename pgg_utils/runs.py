@@ -26,6 +26,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+from pgg_utils import scripts
 from pgg_utils.arguments import ARGUMENT_RULES, run_name_error, training_arguments
 from pgg_utils.files import InputError, LockedError, exit_status, lock_directory, write_atomic
 from pgg_utils.guidance import schedule_error
@@ -213,7 +214,8 @@ def machine() -> str:
 def code_revision(script: Path) -> dict:
     """The training code of a run, the script and this package: the git commit of its checkout where
     there is one (and whether those files differ from it; None where git cannot tell), and always their
-    sha1. Taken when the run starts, before a checkout can move under it."""
+    sha1, and the script's own (`script_sha1`), which a sweep compares with the file that evaluates the run.
+    Taken when the run starts, before a checkout can move under it."""
     files = [Path(script).resolve(), *sorted(Path(__file__).resolve().parent.glob("*.py"))]
     digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()
     commit = modified = None
@@ -228,7 +230,8 @@ def code_revision(script: Path) -> dict:
             modified = bool(status.stdout.strip()) if status.returncode == 0 else None
     except (OSError, subprocess.SubprocessError):  # no git
         commit = None
-    return {"commit": commit, "modified": modified, "sha1": digest, "files": [f.name for f in files]}
+    return {"commit": commit, "modified": modified, "sha1": digest, "files": [f.name for f in files],
+            "script_sha1": scripts.file_sha1(files[0])}  # fmt: skip
 
 
 def action_bounds(ckpt: dict) -> tuple:
@@ -243,10 +246,14 @@ def action_bounds(ckpt: dict) -> tuple:
     return low, high
 
 
-def require_kind(ckpt: dict, kind: str, source: str | Path = "checkpoint") -> None:
-    """ValueError unless `ckpt` is a checkpoint of a `kind` (discrete/continuous) script, of a readable format."""
+def require_own(ckpt: dict, kind: str, script: str | Path, source: str | Path = "checkpoint") -> None:
+    """ValueError unless `ckpt` is a checkpoint of a readable format trained by `script` (a script of
+    `kind` actions, discrete/continuous), or by a script of its file name: a fork's `Agent` is its own."""
     if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != kind:
         raise ValueError(f"{source} is not a {kind} PGG checkpoint of format {READABLE_FORMAT_VERSIONS}")
+    if Path(scripts.script_name(ckpt)).name != Path(script).name:
+        raise ValueError(f"{source} was trained by {scripts.script_name(ckpt)}, not {Path(script).name}: load it with "
+                         "its own script's load_checkpoint, or pgg_utils.scripts.load_checkpoint")  # fmt: skip
 
 
 def non_finite(state: dict) -> list[str]:
@@ -646,6 +653,7 @@ class Run:
         payload = {
             "format_version": CHECKPOINT_FORMAT_VERSION,
             "script": self.script.stem,
+            "script_path": scripts.recorded_path(self.script),
             "action_space": self.kind,
             "env_id": self.args.env_id,
             **shapes,

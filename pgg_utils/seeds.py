@@ -4,6 +4,11 @@ each episode of a cell is counted once."""
 from pgg_utils.files import InputError
 
 
+def cell_of(row: dict) -> tuple:
+    """(step, γ, evaluation mode) of a sweep's row: which cell of its run it belongs to."""
+    return (row["step"], row["eval_guidance"], row["policy"], row["null_branch"])
+
+
 def check_one_run_per_seed(rows, configuration, cell, source=lambda row: None) -> None:
     """InputError (one line) where two runs would count as the same seed of one configuration
     (`configuration(row)`: env, variant, config, ...), or one episode of a cell (`cell(row)`: step, γ,

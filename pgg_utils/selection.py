@@ -18,6 +18,7 @@ import numpy as np
 from scipy import stats
 
 from pgg_utils.files import InputError
+from pgg_utils.identity import configuration
 from pgg_utils.stats import correct_family, mean_ci95
 
 BASELINE_GAMMA = 1.0  # no guidance: what a selected γ has to beat
@@ -34,9 +35,8 @@ TESTED, SELECTED_BASELINE, INCOMPLETE = "tested", "selected γ = 1", "incomplete
 
 def group_key(row: dict) -> tuple:
     """(env, variant, config, training guidance, dropout, step): the checkpoints of one configuration at
-    one step, across seeds. Guidance and dropout exactly, as plot_results.configuration has them."""
-    return (row["env_id"], row["variant"], row["config"], float(row["train_guidance"]), float(row["cond_dropout"]),
-            int(row["step"]))  # fmt: skip
+    one step, across seeds (identity.configuration, and the step)."""
+    return (*configuration(row), int(row["step"]))
 
 
 def seed_means(rows: list[dict]) -> dict:

@@ -308,7 +308,7 @@ def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observati
     ckpt = {"env_id": "Reacher-v4", "action_space": "continuous", "obs_dim": 11, "action_dim": 2}
     policy = sweep.GuidedPolicy(agent, ckpt)
     (total, distance), *_ = goal_distance.final_distances(policy, ckpt, 1.5, 2, 10_000)
-    env = sweep.make_eval_env(ckpt)  # the same episode by hand: its fingertip-to-target vector at the end
+    env = policy.make_env()  # the same episode by hand: its fingertip-to-target vector at the end
     obs, _ = env.reset(seed=10_000)
     noise = sweep.episode_noise("continuous", 10_000, 0, 50, 2)
     for t in range(50):

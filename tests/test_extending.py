@@ -9,7 +9,7 @@ import pytest
 import torch
 import torch._dynamo.testing
 import tyro
-from conftest import SCRIPTS, one_line_error, run_script, small_args, train
+from conftest import SCRIPTS, config_label, one_line_error, run_script, small_args, train
 from torch import nn
 
 import eval_gamma_sweep as sweep
@@ -18,7 +18,7 @@ import ppo_pgg_discrete
 from pgg_utils import fast, identity, paper, runs
 from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
 from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
-from pgg_utils.paper import GOAL_DIMS, REFERENCE_ARGS
+from pgg_utils.identity import FROZEN_DEFAULTS, GOAL_DIMS
 
 LINEAR = {"guidance": 1.0, "guidance_schedule": "linear", "guidance_final": 1.3, "cond_dropout": 0.0}
 
@@ -46,15 +46,16 @@ def test_a_linear_schedule_from_one_trains_the_null_embedding_and_is_named_for_w
     np.testing.assert_allclose(logged(run_dir, "pgg/guidance"), np.linspace(1.0, 1.3, 6), rtol=1e-6)
     ckpt = load(run_dir, 1536)
     assert ckpt["model"]["null_obs"].abs().sum() > 0  # γ_train = 1 at the start, yet the null branch trains
-    run = identity.run_identity(ckpt["args"], "discrete")
-    assert run.variant == "pgg_g1to1.3" and run.name == "PGG, γ_train 1 → 1.3" and run.paper_rows is None
-    assert identity.config_label(ckpt) == "pgg_g1to1.3 num_steps=64 total_timesteps=1536"
+    variant = identity.variant_id(ckpt["args"])
+    assert variant == "pgg_g1to1.3" and paper.paper_name(variant) == "PGG, γ_train 1 → 1.3"
+    assert paper.paper_rows(variant) is None
+    assert config_label(ckpt) == "pgg_g1to1.3 num_steps=64 total_timesteps=1536"
 
 
 def test_constant_guidance_one_without_dropout_leaves_the_null_embedding_out(tmp_path):
     ckpt = load(train(ppo_pgg_discrete, small_args("discrete", tmp_path, guidance=1.0, cond_dropout=0.0)), 1536)
     assert torch.equal(ckpt["model"]["null_obs"], torch.zeros(4))
-    assert identity.run_identity(ckpt["args"], "discrete").variant == "ppo"
+    assert identity.variant_id(ckpt["args"]) == "ppo"
 
 
 @pytest.mark.parametrize("schedule", ["linear", "adaptive"])
@@ -106,7 +107,7 @@ def test_an_adaptive_run_logs_the_gamma_its_rule_chose(tmp_path):
             strength / ADAPTIVE_STEP if kl > 1.5e-6 else strength * ADAPTIVE_STEP if kl < 1e-6 / 1.5 else strength
         )
         assert following == pytest.approx(min(max(1 + expected, 1.0), 1.5), rel=1e-6)
-    assert identity.run_identity(load(run_dir, 1536)["args"], "discrete").variant == "pgg_adaptive1.1_kl1e-06"
+    assert identity.variant_id(load(run_dir, 1536)["args"]) == "pgg_adaptive1.1_kl1e-06"
 
 
 @pytest.mark.parametrize(
@@ -203,14 +204,14 @@ def test_the_numpy_copy_is_checked_against_its_module(monkeypatch):
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
-def test_every_training_argument_is_in_the_reference_and_has_a_rule(kind):
-    """A new field of Args must be added to pgg_utils/paper.py's REFERENCE_ARGS (at the value that trains
-    as before it existed) and to pgg_utils/arguments.py's ARGUMENT_RULES; this test says which is missing."""
+def test_every_training_argument_has_a_rule_and_the_scripts_defaults_are_cleanrls(kind):
+    """A new field of Args needs a rule in pgg_utils/arguments.py's ARGUMENT_RULES (this test says which is
+    missing), and the two scripts' defaults are the frozen ones labels are written against (CleanRL's),
+    so that the committed tables keep their labels; a fork's new argument needs neither table to be kept apart."""
     training = {f.name for f in dataclasses.fields(SCRIPTS[kind].Args)} - RUN_ONLY_ARGS - {"env_id", "seed"}
-    assert not training - REFERENCE_ARGS[kind].keys(), f"add to REFERENCE_ARGS[{kind!r}]"
     assert not training - ARGUMENT_RULES.keys(), "add to ARGUMENT_RULES"
-    assert not REFERENCE_ARGS[kind].keys() - training, "REFERENCE_ARGS names an argument the script lacks"
     defaults = dataclasses.asdict(SCRIPTS[kind].Args())
+    assert {name: defaults[name] for name in training} == FROZEN_DEFAULTS[kind]
     for name in training:  # today's defaults pass their own rule
         assert ARGUMENT_RULES[name][0](defaults[name]), name
 
@@ -233,7 +234,7 @@ def test_a_goal_null_embedding_replaces_only_the_goal_dimensions():
         noise = np.zeros((5, 2), np.float32)
         actions, _, _ = policy.act(obs.numpy(), noise)
         torch.testing.assert_close(torch.from_numpy(actions), agent.guided_mean(obs, 1.5), rtol=1e-5, atol=1e-6)
-    args = {**REFERENCE_ARGS["continuous"], "env_id": "Reacher-v4", "guidance": 1.1, "null_dims": goal}
+    args = {**FROZEN_DEFAULTS["continuous"], "env_id": "Reacher-v4", "guidance": 1.1, "null_dims": goal}
     assert identity.variant_id(args) == "pgg_g1.1_goal"
     assert identity.variant_id({**args, "null_dims": [4, 5]}) == "pgg_g1.1_null4-5"
     assert identity.variant_id({**args, "guidance": 1.0}) == "ppo"  # without guidance the null is unused
@@ -274,8 +275,8 @@ def test_the_launchers_variants_are_named_by_their_flags(variant):
     flags = paper.variant_flags(variant, env_id)
     module = ppo_pgg_continuous
     args = tyro.cli(module.Args, args=["--env-id", env_id, *flags])
-    assert identity.run_identity({**dataclasses.asdict(args)}, "continuous").variant == variant
-    compared = identity.run_identity(dataclasses.asdict(args), "continuous").paper_rows is not None
+    assert identity.variant_id(dataclasses.asdict(args)) == variant
+    compared = paper.paper_rows(variant) is not None
     assert compared == (variant in ("ppo", "pgg_g1.1"))  # the paper's tables hold PPO and γ_train 1.1
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, default_sigint, train
+from conftest import ROOT, config_label, default_sigint, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
@@ -185,12 +185,20 @@ def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
     assert np.abs(actions).max() == 1.0 and (np.abs(actions) == 1.0).mean() > 0.5
 
 
+def cell_file(output, checkpoint_file, gamma, settings, digest=None) -> Path:
+    """cells.cell_path of a checkpoint file as a sweep in this process names it."""
+    digest = digest or hashlib.sha1(Path(checkpoint_file).read_bytes()).hexdigest()
+    evaluation, _ = sweep.evaluation_of(checkpoint_file, sweep.read_checkpoint(checkpoint_file)[1], (), {})
+    return cells.cell_path(output, checkpoint_file, gamma, settings, digest, cells.evaluation_stack(),
+                           evaluation.evaluator)  # fmt: skip
+
+
 def test_a_fix_that_changes_results_invalidates_earlier_cells(runs, tmp_path, monkeypatch):
     settings = (50, 10_000, False, False)
-    before = cells.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings)
-    assert cells.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) == before
+    before = cell_file(tmp_path, checkpoint(runs, "continuous"), 1.0, settings)
+    assert cell_file(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) == before
     monkeypatch.setattr(cells, "EVALUATOR_REVISION", cells.EVALUATOR_REVISION + 1)
-    assert cells.cell_path(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) != before
+    assert cell_file(tmp_path, checkpoint(runs, "continuous"), 1.0, settings) != before
 
 
 def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, tmp_path):
@@ -201,11 +209,11 @@ def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, 
     shutil.copy(original, moved)  # a new path and a new timestamp, as on another machine
     assert moved.stat().st_mtime_ns != original.stat().st_mtime_ns
     output = tmp_path / "sweep"
-    assert cells.cell_path(output, moved, 1.0, settings) == cells.cell_path(output, original, 1.0, settings)
+    assert cell_file(output, moved, 1.0, settings) == cell_file(output, original, 1.0, settings)
     changed = tmp_path / "changed" / original.relative_to(runs)
     changed.parent.mkdir(parents=True)
     changed.write_bytes(original.read_bytes() + b"\0")
-    assert cells.cell_path(output, changed, 1.0, settings) != cells.cell_path(output, original, 1.0, settings)
+    assert cell_file(output, changed, 1.0, settings) != cell_file(output, original, 1.0, settings)
 
 
 def test_uniform_null_control_is_temperature_scaling(runs):
@@ -386,14 +394,14 @@ def test_a_plain_tensor_file_is_skipped_without_a_warning(runs, tmp_path):
 
 def test_config_label_names_every_training_argument_that_differs(runs):
     _, ckpt = sweep.read_checkpoint(checkpoint(runs, "discrete"))
-    assert sweep.config_label(ckpt) == "pgg_g1.1 total_timesteps=4096"  # not seed, checkpoint_interval, output_dir
+    assert config_label(ckpt) == "pgg_g1.1 total_timesteps=4096"  # not seed, checkpoint_interval, output_dir
     _, other_lr = sweep.read_checkpoint(max((runs / "discrete_lr").rglob("step_*.pt")))
-    assert sweep.config_label(other_lr) == "pgg_g1.1 learning_rate=0.002 total_timesteps=4096"
+    assert config_label(other_lr) == "pgg_g1.1 learning_rate=0.002 total_timesteps=4096"
     # An older checkpoint lacks arguments added since: they count as their defaults.
     old_args = {
         k: v for k, v in ckpt["args"].items() if k not in ("total_timesteps", "ent_coef", "resume", "overwrite")
     }
-    assert sweep.config_label({**ckpt, "args": old_args}) == "pgg_g1.1"
+    assert config_label({**ckpt, "args": old_args}) == "pgg_g1.1"
     defaults = {
         **dataclasses.asdict(ppo_pgg_discrete.Args()),
         "seed": 7,
@@ -401,20 +409,18 @@ def test_config_label_names_every_training_argument_that_differs(runs):
         "torch_threads": 2,
         "compile": True,
     }
-    assert sweep.config_label({**ckpt, "args": defaults}) == "ppo"
+    assert config_label({**ckpt, "args": defaults}) == "ppo"
     assert (
-        sweep.config_label({**ckpt, "args": {**defaults, "cond_dropout": 0.1, "anneal_lr": False}})
+        config_label({**ckpt, "args": {**defaults, "cond_dropout": 0.1, "anneal_lr": False}})
         == "pgg_drop0.1 anneal_lr=False"
     )
     # MuJoCo tasks carry the simulator's version where the checkpoint records it; CartPole does not run on it.
-    assert "mujoco" not in sweep.config_label({**ckpt, "versions": {"mujoco": "2.3.7"}})
+    assert "mujoco" not in config_label({**ckpt, "versions": {"mujoco": "2.3.7"}})
     _, hopper = sweep.read_checkpoint(checkpoint(runs, "continuous"))
     hopper_label = "pgg_g1.1 num_minibatches=8 num_steps=1024 total_timesteps=2048 update_epochs=2"
-    assert sweep.config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
+    assert config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
     # A format-1 checkpoint records no versions: never pooled with runs whose stack is known.
-    assert (
-        sweep.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
-    )
+    assert config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
 
 
 def test_runs_of_one_seed_number_in_different_configurations_stay_apart(runs, tmp_path):
@@ -487,14 +493,14 @@ def test_a_cell_is_named_by_the_bytes_it_evaluated(runs, tmp_path, monkeypatch):
     sweep.sweep(args)
     digest = hashlib.sha1(evaluated_bytes).hexdigest()
     settings = sweep.settings_of(args)
-    evaluated_cell = cells.cell_path(tmp_path / "out", target, 2.0, settings, digest)
+    evaluated_cell = cell_file(tmp_path / "out", target, 2.0, settings, digest)
     assert [p.name for p in (tmp_path / "out" / "cells").iterdir()] == [evaluated_cell.name]
     assert "learning_rate=0.002" not in evaluated_cell.read_text()
     # The file now holds other bytes: a rerun evaluates them, into a cell of their own.
     evaluated = []
     monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
     sweep.sweep(args)
-    assert len(evaluated) == 1 and cells.cell_path(tmp_path / "out", target, 2.0, settings).exists()
+    assert len(evaluated) == 1 and cell_file(tmp_path / "out", target, 2.0, settings).exists()
     assert "learning_rate=0.002" in (tmp_path / "out" / "episodes.csv").read_text()
 
 

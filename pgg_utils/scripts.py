@@ -1,0 +1,149 @@
+"""Which training script a checkpoint names, found and imported, so that a checkpoint is evaluated by
+the code that trained it, as CleanRL's evaluation takes `Agent` from the file that trained it.
+
+A checkpoint records its script (`script_path`): relative to the repository for a script in it (the
+two originals, or a fork copied beside them), absolute for a script elsewhere. A checkpoint is data:
+its script is looked up only in the repository and among the files the user names (`--script`), never
+at a path the checkpoint alone supplies. Checkpoints from before `script_path` name the script's stem
+(`script`), always one of the repository's."""
+
+import functools
+import hashlib
+import importlib
+import importlib.util
+import inspect
+import sys
+from pathlib import Path
+
+# The folder that holds the training scripts beside this package: the checkout, or site-packages.
+REPOSITORY = Path(__file__).resolve().parent.parent
+# The repository's own training scripts, by the action space they train.
+ORIGINALS = {"discrete": "ppo_pgg_discrete", "continuous": "ppo_pgg_continuous"}
+
+
+class ScriptError(ValueError):
+    """A checkpoint whose script cannot be found, imported or trusted; the message is one line."""
+
+
+def recorded_path(script: Path) -> str:
+    """What a checkpoint records of the script that trains it: its path relative to the repository, or
+    its absolute path where it lies elsewhere."""
+    script = Path(script).resolve()
+    return str(script.relative_to(REPOSITORY)) if script.is_relative_to(REPOSITORY) else str(script)
+
+
+def script_name(ckpt: dict) -> str:
+    """The name of a checkpoint's script in its configuration: the recorded path (`ppo_pgg_relu.py`,
+    `/home/me/ppo_relu.py`), or the original's file name for checkpoints that record only a stem."""
+    if ckpt.get("script_path"):
+        return ckpt["script_path"]
+    stem = ckpt.get("script") or ORIGINALS.get(ckpt.get("action_space"), "")
+    return f"{stem}.py"
+
+
+def is_original(ckpt: dict) -> bool:
+    """Whether the repository's own script for the checkpoint's action space trained it."""
+    return script_name(ckpt) == f"{ORIGINALS.get(ckpt.get('action_space'))}.py"
+
+
+def original(kind: str):
+    """The module of the repository's own training script for `kind` (discrete/continuous) actions."""
+    return load_module(REPOSITORY / f"{ORIGINALS[kind]}.py")
+
+
+def file_sha1(path: Path) -> str:
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+
+
+def locate(ckpt: dict, given: tuple[Path, ...] = ()) -> Path:
+    """The file that evaluates `ckpt`: a file of `given` (--script) with the file name of its script,
+    else the repository's file of its recorded name. ScriptError (one line) where neither exists."""
+    name = script_name(ckpt)
+    for path in given:
+        if Path(path).name == Path(name).name:
+            return Path(path).resolve()
+    if Path(name).is_absolute():
+        raise ScriptError(f"it was trained by {name}, outside the repository ({REPOSITORY}); scripts are looked up "
+                          f"there and in --script: pass --script {name} to evaluate it with that file")  # fmt: skip
+    path = REPOSITORY / name
+    if not path.is_file():
+        raise ScriptError(f"its training script {name} is not in the repository ({REPOSITORY}): pass --script PATH "
+                          "to evaluate it with a copy of it")  # fmt: skip
+    return path
+
+
+@functools.cache
+def load_module(path: Path):
+    """The module of a training script file, imported once per process. The repository's scripts are
+    their importable modules (`import ppo_pgg_continuous` is the same object); any other file gets a
+    name of its own, so that two scripts of one file name never replace each other."""
+    path = Path(path).resolve()
+    if path.parent == REPOSITORY and path.suffix == ".py":
+        module = importlib.import_module(path.stem)
+        if Path(module.__file__).resolve() == path:
+            return module
+    name = f"pgg_script_{hashlib.sha1(str(path).encode()).hexdigest()[:12]}_{path.stem}"
+    try:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # dataclasses resolve their fields' module through sys.modules
+        spec.loader.exec_module(module)
+    except Exception as e:  # a script's import raises whatever its code raises
+        sys.modules.pop(name, None)
+        raise ScriptError(
+            f"cannot import {path} ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})"
+        ) from None
+    return module
+
+
+def training_module(ckpt: dict, given: tuple[Path, ...] = ()):
+    """(module, file) of the script that evaluates `ckpt` (locate), checked to be a training script of
+    the checkpoint's action space. ScriptError with one line otherwise."""
+    path = locate(ckpt, given)
+    module = load_module(path)
+    missing = [
+        name for name in ("Args", "ACTION_SPACE", "agent_from_checkpoint", "make_env") if not hasattr(module, name)
+    ]
+    if missing:
+        raise ScriptError(f"{path} is not a training script of this project (it lacks {', '.join(missing)})")
+    if module.ACTION_SPACE != ckpt.get("action_space"):
+        raise ScriptError(f"{path} trains {module.ACTION_SPACE} actions; the checkpoint is {ckpt.get('action_space')}")
+    return module, path
+
+
+def load_agent(ckpt: dict, source, given: tuple[Path, ...] = ()):
+    """(agent in eval mode, module, file) of a loaded checkpoint dict, by the script that evaluates it.
+    ScriptError with one line where that script's `Agent` cannot load the weights."""
+    module, path = training_module(ckpt, given)
+    try:
+        agent = module.agent_from_checkpoint(ckpt, source)
+    except RuntimeError as e:  # load_state_dict's size mismatch: a fork whose network is another shape
+        raise ScriptError(f"{path.name}'s Agent cannot load its weights ({str(e).splitlines()[0]})") from None
+    return agent, module, path
+
+
+def task_sources(env_id: str, env) -> dict[str, str]:
+    """{file: sha1} of the code of a task outside gymnasium (the module of `env`'s class and, for an id
+    `module:Task-v0`, the module that registers it): part of what a sweep's cell was computed with.
+    gymnasium's own tasks are named by its version instead."""
+    import gymnasium
+
+    gymnasium_dir = Path(gymnasium.__file__).resolve().parent
+    files = {inspect.getsourcefile(type(env.unwrapped))}
+    if ":" in env_id:
+        files.add(getattr(sys.modules.get(env_id.split(":")[0]), "__file__", None))
+    sources = {}
+    for file in filter(None, files):
+        path = Path(file).resolve()
+        if not path.is_relative_to(gymnasium_dir) and path.is_file():
+            sources[str(path)] = file_sha1(path)
+    return sources
+
+
+def load_checkpoint(path, given: tuple[Path, ...] = ()):
+    """(agent in eval mode, checkpoint dict) of a checkpoint file of any training script, the agent
+    built by the script that trained it (locate). ValueError with one line where that cannot be done."""
+    from pgg_utils.runs import read_checkpoint_file
+
+    ckpt = read_checkpoint_file(path)
+    return load_agent(ckpt, path, given)[0], ckpt
