@@ -57,7 +57,7 @@ import time
 from collections import defaultdict
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -302,8 +302,8 @@ def run_job(job: Job) -> JobResult:
     episodes, eval_seed, deterministic, uniform_null = job.settings
     try:
         digest, ckpt = read_checkpoint(job.checkpoint)
-        agent, module, _ = scripts.load_agent(ckpt, job.checkpoint, (job.script,))
-        fields = configuration_fields(ckpt, asdict(module.Args()))
+        agent, _, _ = scripts.load_agent(ckpt, job.checkpoint, (job.script,))
+        fields = configuration_fields(ckpt)
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
@@ -465,8 +465,8 @@ class Evaluation:
     record: dict
 
 
-def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_code: dict) -> tuple[Evaluation, dict]:
-    """(Evaluation, the script's Args defaults) of a checkpoint, by the script that trained it. The
+def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_code: dict) -> Evaluation:
+    """How a checkpoint is evaluated, by the script that trained it. The
     evaluator fingerprint is that script's sha1 and the sha1 of a custom task's code (scripts.task_sources;
     gymnasium's own tasks are named by its version in the stack), so an edit to either re-evaluates the
     cells. `task_code` caches the task's code by (script, env). ValueError (one line) where the script
@@ -488,7 +488,7 @@ def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_co
     record = {"run": checkpoint.parent.parent.name, "step": ckpt["step_mark"], "env_id": ckpt["env_id"],
               "trained_by": scripts.script_name(ckpt), "evaluated_by": scripts.recorded_path(script),
               "evaluated_by_sha1": script_sha1, "same_script": same}  # fmt: skip
-    return Evaluation(script, evaluator, record), asdict(module.Args())
+    return Evaluation(script, evaluator, record)
 
 
 def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skipped: list[str]):
@@ -501,8 +501,8 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
     for checkpoint in checkpoints:
         try:
             digest, ckpt = read_checkpoint(checkpoint)
-            evaluation, defaults = evaluation_of(checkpoint, ckpt, given, task_code)
-            fields = configuration_fields(ckpt, defaults)
+            evaluation = evaluation_of(checkpoint, ckpt, given, task_code)
+            fields = configuration_fields(ckpt)
             identity = (ckpt["env_id"], fields["config"], fields["train_guidance"], fields["cond_dropout"],
                         ckpt["args"]["seed"], ckpt["step_mark"])  # fmt: skip
             kind = ckpt["action_space"]

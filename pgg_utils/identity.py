@@ -75,12 +75,14 @@ def variant_id(args: dict) -> str:
     return "pgg_" + "_".join(parts) if parts else "ppo"
 
 
-def training_words(args: dict, kind: str, defaults: dict) -> list[str]:
-    """`key=value` for every training argument outside the variant that differs from its frozen default
-    (FROZEN_DEFAULTS of `kind`), or for an argument those lack, from the script's (`defaults`: asdict of
-    its Args()), sorted by name; one an older checkpoint lacks counts as the default, and one the script
-    no longer has is named with its value."""
-    defaults, words = {**defaults, **FROZEN_DEFAULTS.get(kind, {})}, []
+def training_words(ckpt: dict) -> list[str]:
+    """`key=value` for every training argument of a checkpoint outside the variant that differs from its
+    default: the frozen one (FROZEN_DEFAULTS of its action space) where there is one, else its script's
+    own as the checkpoint records them (`arg_defaults`: a fork's new argument), sorted by name. One an
+    older checkpoint lacks counts as the default; one with no default anywhere is named with its value."""
+    args = ckpt["args"]
+    defaults = {**ckpt.get("arg_defaults", {}), **FROZEN_DEFAULTS.get(ckpt.get("action_space"), {})}
+    words = []
     for key in sorted((defaults.keys() | args.keys()) - RUN_ONLY_ARGS - VARIANT_ARGS - {"env_id", "seed"}):
         value = args.get(key, defaults.get(key))
         if key not in defaults or normalised(value) != normalised(defaults[key]):
@@ -106,11 +108,10 @@ def run_name(args) -> str:
     return f"{args.env_id}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
 
 
-def config_label(ckpt: dict, defaults: dict) -> str:
+def config_label(ckpt: dict) -> str:
     """A checkpoint's configuration as a label, the key every reader pools runs by: its variant,
     `script=<file>` where a script other than the repository's own for its action space trained it,
-    every training argument that differs from its default (training_words; `defaults`: asdict of the
-    script's Args()),
+    every training argument that differs from its default (training_words),
     then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint
     records no package versions (format 1), so that it is never pooled with runs whose stack is known.
     Left out: env_id and seed (a table's rows and columns) and the run-only arguments. E.g. `pgg_g1.1
@@ -119,7 +120,7 @@ def config_label(ckpt: dict, defaults: dict) -> str:
     words = [variant_id(args)]
     if not scripts.is_original(ckpt):
         words.append(f"script={scripts.script_name(ckpt)}")
-    words += training_words(args, ckpt["action_space"], defaults)
+    words += training_words(ckpt)
     versions = ckpt.get("versions")
     if not versions:
         words.append("versions=unknown")
@@ -128,11 +129,11 @@ def config_label(ckpt: dict, defaults: dict) -> str:
     return " ".join(words)
 
 
-def configuration_fields(ckpt: dict, defaults: dict) -> dict:
+def configuration_fields(ckpt: dict) -> dict:
     """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration`
     reads them back): its variant, its config label, its γ_train (the first, for a schedule) and dropout."""
     args = {"env_id": ckpt["env_id"], **ckpt["args"]}
-    return {"variant": variant_id(args), "config": config_label(ckpt, defaults),
+    return {"variant": variant_id(args), "config": config_label(ckpt),
             "train_guidance": float(args["guidance"]), "cond_dropout": float(args.get("cond_dropout", 0.0))}  # fmt: skip
 
 

@@ -4,7 +4,7 @@ train a tiny run and run a script as a user would."""
 import signal
 import subprocess
 import sys
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -16,15 +16,9 @@ torch.set_num_threads(1)
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import identity, runs, scripts
+from pgg_utils import runs
 
 SCRIPTS = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
-
-
-def config_label(ckpt: dict) -> str:
-    """A checkpoint's configuration label, against the defaults of the script that trained it."""
-    module, _ = scripts.training_module(ckpt)
-    return identity.config_label(ckpt, asdict(module.Args()))
 
 
 def small_args(kind: str, tmp_path, **overrides):

@@ -2,20 +2,23 @@
 γ_train, a bigger actor, a new argument, a goal-conditioned null embedding, acting with a loaded agent."""
 
 import dataclasses
+import sys
 from dataclasses import replace
+from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
 import torch._dynamo.testing
 import tyro
-from conftest import SCRIPTS, config_label, one_line_error, run_script, small_args, train
+from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
 from torch import nn
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import fast, identity, paper, runs
+from pgg_utils import fast, files, identity, paper, runs, scripts
 from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
 from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
 from pgg_utils.identity import FROZEN_DEFAULTS, GOAL_DIMS
@@ -49,7 +52,7 @@ def test_a_linear_schedule_from_one_trains_the_null_embedding_and_is_named_for_w
     variant = identity.variant_id(ckpt["args"])
     assert variant == "pgg_g1to1.3" and paper.paper_name(variant) == "PGG, γ_train 1 → 1.3"
     assert paper.paper_rows(variant) is None
-    assert config_label(ckpt) == "pgg_g1to1.3 num_steps=64 total_timesteps=1536"
+    assert identity.config_label(ckpt) == "pgg_g1to1.3 num_steps=64 total_timesteps=1536"
 
 
 def test_constant_guidance_one_without_dropout_leaves_the_null_embedding_out(tmp_path):
@@ -312,3 +315,141 @@ def test_a_checkpoint_with_clip_actions_infinite_bounds_acts_within_the_tasks(tm
     agent = ppo_pgg_continuous.agent_from_checkpoint(old)
     np.testing.assert_array_equal(agent.action_bounds[1], np.full(17, 0.4, np.float32))  # Humanoid's own
     assert np.abs(agent.act(np.zeros(ckpt["obs_dim"]), guidance=50.0, noise=np.full((1, 17), 9.0))).max() == 0.4
+
+
+# --- a fork: a copied script is evaluated by its own code and kept apart -----------------------------
+
+# A researcher's first-week fork of the continuous script: ReLU in place of Tanh, and a new argument
+# whose loss term reads the unconditional branch (it pulls the unconditional mean toward 0.5).
+FORK_FIELD_ANCHOR = '    """normalised rewards are clipped to [-reward_clip, reward_clip]"""\n'
+FORK_FIELD = '    null_mean_coef: float = 0.0\n    """pull the unconditional mean toward 0.5 (a fork\'s new loss term)"""\n'
+FORK_LOSS_ANCHOR = "    loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef\n"
+FORK_LOSS = "    if args.null_mean_coef:\n        loss = loss + args.null_mean_coef * (agent.unconditional_mean() - 0.5).square().sum()\n"
+
+
+def write_fork(folder: Path, name: str = "ppo_pgg_relu.py") -> Path:
+    source = (ROOT / "ppo_pgg_continuous.py").read_text()
+    assert source.count("nn.Tanh()") == 4 and FORK_FIELD_ANCHOR in source and FORK_LOSS_ANCHOR in source
+    source = source.replace("nn.Tanh()", "nn.ReLU()").replace(FORK_FIELD_ANCHOR, FORK_FIELD_ANCHOR + FORK_FIELD)
+    path = folder / name
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(source.replace(FORK_LOSS_ANCHOR, FORK_LOSS_ANCHOR + FORK_LOSS))
+    return path
+
+
+def train_script(path: Path, tmp_path, run_name: str, **overrides) -> Path:
+    """Trains a tiny continuous run with the training script at `path`, in this process."""
+    module = scripts.load_module(path)
+    base = dataclasses.asdict(small_args("continuous", tmp_path / "runs", run_name=run_name))
+    return runs.train_in_process(module, module.Args(**{**base, **overrides}))
+
+
+def sweep_rows(tmp_path, name: str, *given: Path, **overrides) -> list[dict]:
+    args = sweep.Args(paths=(str(tmp_path / "runs"),), output=str(tmp_path / name), gammas=(1.0, 1.5), episodes=3,
+                      steps=(768,), deterministic=True, script=tuple(map(str, given)), **overrides)  # fmt: skip
+    sweep.sweep(args)
+    return files.read_csv(tmp_path / name / "episodes.csv")
+
+
+def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_original(tmp_path, capsys):
+    fork = write_fork(tmp_path / "elsewhere")
+    fork_run = train_script(fork, tmp_path, "fork_s1", seed=1)
+    train_script(ROOT / "ppo_pgg_continuous.py", tmp_path, "tanh_s2", seed=2)
+    # A fork outside the repository is evaluated only where the user names it: one line, the rest swept.
+    rows = sweep_rows(tmp_path, "unnamed")
+    assert {row["run"] for row in rows} == {"tanh_s2"}
+    assert f"pass --script {fork}" in files.read_csv(tmp_path / "unnamed" / "skipped.csv")[0]["reason"]
+    rows = sweep_rows(tmp_path, "named", fork)
+    configs = {row["run"]: row["config"] for row in rows}
+    tanh = "pgg_g1.1_drop0.1 num_minibatches=4 num_steps=256 total_timesteps=768 update_epochs=2 mujoco=2.3.7"
+    assert configs["tanh_s2"] == tanh
+    assert configs["fork_s1"] == configs["tanh_s2"].replace("drop0.1", f"drop0.1 script={fork}")
+    assert len(files.read_csv(tmp_path / "named" / "summary.csv")) == 4  # two configurations x two γ, never pooled
+    (evaluated,) = [r for r in files.read_csv(tmp_path / "named" / "evaluated_by.csv") if r["run"] == "fork_s1"]
+    assert evaluated["evaluated_by"] == str(fork) and evaluated["same_script"] == "yes"
+    # The sweep's episodes are the fork's own Agent.act, not the original Agent's with the fork's weights.
+    fork_module = scripts.load_module(fork)
+    agent, ckpt = fork_module.load_checkpoint(runs.checkpoint_path(fork_run, 768))
+    original = ppo_pgg_continuous.make_agent(ckpt["args"], ckpt)
+    original.load_state_dict(ckpt["model"])
+    for gamma in (1.0, 1.5):
+        swept = [float(r["return"]) for r in rows if r["run"] == "fork_s1" and float(r["eval_guidance"]) == gamma]
+        own, _ = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt), ckpt, gamma, 3, 10_000, True)
+        tanh, _ = sweep.evaluate_cell(sweep.GuidedPolicy(original.eval(), ckpt), ckpt, gamma, 3, 10_000, True)
+        assert swept == own.tolist() and swept != tanh.tolist()
+    # The original script's loader refuses the fork's checkpoint in one line.
+    with pytest.raises(ValueError, match="was trained by .*ppo_pgg_relu.py, not ppo_pgg_continuous.py"):
+        ppo_pgg_continuous.load_checkpoint(runs.checkpoint_path(fork_run, 768))
+
+
+def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_under_guidance_one(tmp_path):
+    fork = write_fork(tmp_path / "elsewhere")
+    plain = {"guidance": 1.0, "cond_dropout": 0.0}
+    pulled = load(train_script(fork, tmp_path, "pulled_s1", seed=1, null_mean_coef=0.5, **plain), 768)
+    default = load(train_script(fork, tmp_path, "default_s2", seed=2, **plain), 768)
+    # The loss reads the null branch: it trains at γ_train 1, no dropout. At the default it is PPO's run.
+    assert pulled["model"]["null_obs"].abs().sum() > 0 and not default["model"]["null_obs"].any()
+    ppo = load(train_script(ROOT / "ppo_pgg_continuous.py", tmp_path, "ppo_s2", seed=2, **plain), 768)
+    assert not torch.equal(default["model"]["actor_mean.0.weight"], ppo["model"]["actor_mean.0.weight"])  # ReLU
+    rows = sweep_rows(tmp_path, "sweep", fork)
+    configs = {row["run"]: row["config"] for row in rows}
+    assert "null_mean_coef=0.5" in configs["pulled_s1"] and "null_mean_coef" not in configs["default_s2"]
+    assert len(set(configs.values())) == 3
+    summary = files.read_csv(tmp_path / "sweep" / "summary.csv")
+    assert {row["n_seeds"] for row in summary} == {"1"} and len(summary) == 6
+
+
+def test_an_edited_script_or_task_is_evaluated_again_never_read_from_the_cache(tmp_path, monkeypatch):
+    fork = write_fork(tmp_path / "elsewhere", "ppo_pgg_continuous.py")  # a copy of the original, as edited in place
+    train_script(fork, tmp_path, "run_s1", seed=1)
+    first = sweep_rows(tmp_path, "sweep", fork)
+    evaluated = []
+    real_run_job = sweep.run_job
+    monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
+    assert sweep_rows(tmp_path, "sweep", fork) == first and not evaluated  # unchanged: every cell reused
+    fork.write_text(fork.read_text().replace("nn.ReLU()", "nn.Tanh()"))  # the Agent edited after the sweep
+    scripts.load_module.cache_clear()
+    again = sweep_rows(tmp_path, "sweep", fork)
+    assert len(evaluated) == 2 and again != first
+    (record,) = files.read_csv(tmp_path / "sweep" / "evaluated_by.csv")
+    assert record["same_script"] == "no"
+
+
+TASK_MODULE = '''
+import gymnasium as gym
+import numpy as np
+
+
+class Drift(gym.Env):
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, (1,), np.float32)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return self.np_random.normal(size=3).astype(np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        reward = REWARD * float(action[0])
+        return self.np_random.normal(size=3).astype(np.float32), reward, False, self.t >= 20, {}
+
+
+gym.register("ForkDrift-v0", entry_point=Drift)
+'''
+
+
+def test_a_custom_tasks_edit_is_evaluated_again(tmp_path, monkeypatch):
+    module = tmp_path / "tasks" / "fork_drift_task.py"
+    module.parent.mkdir()
+    module.write_text("REWARD = 1.0\n" + TASK_MODULE)
+    monkeypatch.syspath_prepend(str(module.parent))
+    env_id = "fork_drift_task:ForkDrift-v0"
+    train_script(ROOT / "ppo_pgg_continuous.py", tmp_path, "drift_s1", env_id=env_id)
+    first = sweep_rows(tmp_path, "sweep")
+    module.write_text("REWARD = -1.0\n" + TASK_MODULE)  # the task's module edited after the sweep
+    for name in [m for m in sys.modules if m == "fork_drift_task"]:
+        del sys.modules[name]
+    gym.registry.pop("ForkDrift-v0")
+    again = sweep_rows(tmp_path, "sweep")
+    assert [-float(r["return"]) for r in again] == [float(r["return"]) for r in first]

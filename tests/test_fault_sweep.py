@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, config_label, train
+from conftest import ROOT, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
@@ -172,7 +172,7 @@ def test_a_configuration_is_named_against_the_frozen_reference_not_the_scripts_d
     """Seed 1 swept by this process and seed 2 by a later one, after the script's default ent_coef
     moved to 0.02: both were trained at 0.01, CleanRL's, and stay one configuration of two seeds."""
     ckpt = torch.load(FORMAT_2, weights_only=True)
-    assert ckpt["args"]["ent_coef"] == 0.01 and config_label(ckpt) == FIXTURE_LABEL
+    assert ckpt["args"]["ent_coef"] == 0.01 and identity.config_label(ckpt) == FIXTURE_LABEL
     reference = {**identity.FROZEN_DEFAULTS["discrete"], "seed": 3, "output_dir": "x", "env_id": "CartPole-v1"}
     todays_labels = {
         "pgg_g1.1": {"guidance": 1.1},
@@ -180,7 +180,7 @@ def test_a_configuration_is_named_against_the_frozen_reference_not_the_scripts_d
         "pgg_drop0.1 learning_rate=0.002": {"cond_dropout": 0.1, "learning_rate": 0.002},
     }
     for label, changes in todays_labels.items():
-        assert config_label({**ckpt, "args": {**reference, **changes}}) == label
+        assert identity.config_label({**ckpt, "args": {**reference, **changes}}) == label
     seed_2 = tmp_path / "seed_2" / "checkpoints" / FORMAT_2.name
     seed_2.parent.mkdir(parents=True)
     torch.save({**ckpt, "args": {**ckpt["args"], "seed": 2}}, seed_2)
@@ -253,4 +253,4 @@ def test_fixture_checkpoints_of_both_formats_load_and_sweep_to_finite_returns(tm
     assert {r["config"] for r in rows} == {label}
     without_code = {key: value for key, value in ckpt.items() if key != "code"}
     code = {"commit": "0" * 40, "modified": True, "sha1": "1" * 40}
-    assert config_label({**ckpt, "code": code}) == config_label(without_code) == label
+    assert identity.config_label({**ckpt, "code": code}) == identity.config_label(without_code) == label

@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, config_label, default_sigint, train
+from conftest import ROOT, default_sigint, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import cells
+from pgg_utils import cells, identity
 from pgg_utils.files import read_csv
 from pgg_utils.runs import checkpoint_step
 
@@ -188,7 +188,7 @@ def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
 def cell_file(output, checkpoint_file, gamma, settings, digest=None) -> Path:
     """cells.cell_path of a checkpoint file as a sweep in this process names it."""
     digest = digest or hashlib.sha1(Path(checkpoint_file).read_bytes()).hexdigest()
-    evaluation, _ = sweep.evaluation_of(checkpoint_file, sweep.read_checkpoint(checkpoint_file)[1], (), {})
+    evaluation = sweep.evaluation_of(checkpoint_file, sweep.read_checkpoint(checkpoint_file)[1], (), {})
     return cells.cell_path(output, checkpoint_file, gamma, settings, digest, cells.evaluation_stack(),
                            evaluation.evaluator)  # fmt: skip
 
@@ -394,14 +394,14 @@ def test_a_plain_tensor_file_is_skipped_without_a_warning(runs, tmp_path):
 
 def test_config_label_names_every_training_argument_that_differs(runs):
     _, ckpt = sweep.read_checkpoint(checkpoint(runs, "discrete"))
-    assert config_label(ckpt) == "pgg_g1.1 total_timesteps=4096"  # not seed, checkpoint_interval, output_dir
+    assert identity.config_label(ckpt) == "pgg_g1.1 total_timesteps=4096"  # not seed, checkpoint_interval, output_dir
     _, other_lr = sweep.read_checkpoint(max((runs / "discrete_lr").rglob("step_*.pt")))
-    assert config_label(other_lr) == "pgg_g1.1 learning_rate=0.002 total_timesteps=4096"
+    assert identity.config_label(other_lr) == "pgg_g1.1 learning_rate=0.002 total_timesteps=4096"
     # An older checkpoint lacks arguments added since: they count as their defaults.
     old_args = {
         k: v for k, v in ckpt["args"].items() if k not in ("total_timesteps", "ent_coef", "resume", "overwrite")
     }
-    assert config_label({**ckpt, "args": old_args}) == "pgg_g1.1"
+    assert identity.config_label({**ckpt, "args": old_args}) == "pgg_g1.1"
     defaults = {
         **dataclasses.asdict(ppo_pgg_discrete.Args()),
         "seed": 7,
@@ -409,18 +409,18 @@ def test_config_label_names_every_training_argument_that_differs(runs):
         "torch_threads": 2,
         "compile": True,
     }
-    assert config_label({**ckpt, "args": defaults}) == "ppo"
+    assert identity.config_label({**ckpt, "args": defaults}) == "ppo"
     assert (
-        config_label({**ckpt, "args": {**defaults, "cond_dropout": 0.1, "anneal_lr": False}})
+        identity.config_label({**ckpt, "args": {**defaults, "cond_dropout": 0.1, "anneal_lr": False}})
         == "pgg_drop0.1 anneal_lr=False"
     )
     # MuJoCo tasks carry the simulator's version where the checkpoint records it; CartPole does not run on it.
-    assert "mujoco" not in config_label({**ckpt, "versions": {"mujoco": "2.3.7"}})
+    assert "mujoco" not in identity.config_label({**ckpt, "versions": {"mujoco": "2.3.7"}})
     _, hopper = sweep.read_checkpoint(checkpoint(runs, "continuous"))
     hopper_label = "pgg_g1.1 num_minibatches=8 num_steps=1024 total_timesteps=2048 update_epochs=2"
-    assert config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
+    assert identity.config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
     # A format-1 checkpoint records no versions: never pooled with runs whose stack is known.
-    assert config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
+    assert identity.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
 
 
 def test_runs_of_one_seed_number_in_different_configurations_stay_apart(runs, tmp_path):
