@@ -322,7 +322,9 @@ def test_a_checkpoint_with_clip_actions_infinite_bounds_acts_within_the_tasks(tm
 # A researcher's first-week fork of the continuous script: ReLU in place of Tanh, and a new argument
 # whose loss term reads the unconditional branch (it pulls the unconditional mean toward 0.5).
 FORK_FIELD_ANCHOR = '    """normalised rewards are clipped to [-reward_clip, reward_clip]"""\n'
-FORK_FIELD = '    null_mean_coef: float = 0.0\n    """pull the unconditional mean toward 0.5 (a fork\'s new loss term)"""\n'
+FORK_FIELD = (
+    '    null_mean_coef: float = 0.0\n    """pull the unconditional mean toward 0.5 (a fork\'s new loss term)"""\n'
+)
 FORK_LOSS_ANCHOR = "    loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef\n"
 FORK_LOSS = "    if args.null_mean_coef:\n        loss = loss + args.null_mean_coef * (agent.unconditional_mean() - 0.5).square().sum()\n"
 
@@ -415,7 +417,7 @@ def test_an_edited_script_or_task_is_evaluated_again_never_read_from_the_cache(t
     assert record["same_script"] == "no"
 
 
-TASK_MODULE = '''
+TASK_MODULE = """
 import gymnasium as gym
 import numpy as np
 
@@ -436,7 +438,7 @@ class Drift(gym.Env):
 
 
 gym.register("ForkDrift-v0", entry_point=Drift)
-'''
+"""
 
 
 def test_a_custom_tasks_edit_is_evaluated_again(tmp_path, monkeypatch):

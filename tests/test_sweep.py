@@ -420,7 +420,10 @@ def test_config_label_names_every_training_argument_that_differs(runs):
     hopper_label = "pgg_g1.1 num_minibatches=8 num_steps=1024 total_timesteps=2048 update_epochs=2"
     assert identity.config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
     # A format-1 checkpoint records no versions: never pooled with runs whose stack is known.
-    assert identity.config_label({k: v for k, v in hopper.items() if k != "versions"}) == hopper_label + " versions=unknown"
+    assert (
+        identity.config_label({k: v for k, v in hopper.items() if k != "versions"})
+        == hopper_label + " versions=unknown"
+    )
 
 
 def test_runs_of_one_seed_number_in_different_configurations_stay_apart(runs, tmp_path):
