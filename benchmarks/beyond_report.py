@@ -10,13 +10,16 @@ paper's tasks, `results/beyond/<task>/heldout_gamma.csv` where the held-out sele
 folder, atomically:
   report.md    at a glance, a table per question (the γ-response at the last mark of the scheduled and
                adaptive variants and their baselines, with Welch tests of their per-seed fall from the best γ
-               to the largest against the baselines'; the final distance to the goal against γ); then per
+               to the largest and of their return at the best γ against the baselines'; the final distance to
+               the goal against γ, with a t test of each seed's change from γ = 1 to the largest); then per
                task: return at each mark at γ = 1 (mean ± 95% CI over seeds, seed sd, runs that fell),
                each new variant against each baseline (Welch + Holm over the report's γ = 1 tests, the gap
                one test can detect at 80% power, the cells above and below over both sweeps, the pooled
                median gap over every (step, γ) cell with its exact bootstrap interval), the held-out γ, the
                γ-response at the last step, and the final distance to the goal against γ
   report.csv   one row per (task, variant, baseline, step) at γ = 1: the tests' numbers
+  report_values.csv   every other number the front page may quote, unrounded (the glance tables, the γ_train,
+               γ-response and pooled counts): one row per (task, variant, baseline, quantity)
   gamma_response.png   return against eval γ at the last step, a panel per task
   guidance_trajectory.png   γ_train over training of the scheduled and adaptive runs
   goal_distance.png    the final distance to the goal against eval γ, a panel per goal task
@@ -36,6 +39,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 import tyro
+from scipy import stats
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
@@ -53,6 +57,7 @@ SCHEDULE_VARIANTS = set(BEYOND_VARIANTS) - GOAL_VARIANTS
 COLLAPSE_FRACTION = 0.5
 REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
                   "p", "p_holm", "detectable_gap", "n_seeds", "baseline_n_seeds"]  # fmt: skip
+VALUE_COLUMNS = ["env_id", "variant", "baseline", "quantity", "value"]
 
 
 @dataclass
@@ -190,7 +195,7 @@ def read_heldout(folder: Path, table_heldout: Path) -> dict:
 
 
 def read_goal_distance(folder: Path) -> dict:
-    """{(env, variant, γ): [final distance per seed]} from goal_distance.csv."""
+    """{(env, variant, γ): {seed: final distance, mean over its episodes}} from goal_distance.csv."""
     path = folder / "goal_distance.csv"
     if not path.exists():
         return {}
@@ -200,7 +205,7 @@ def read_goal_distance(folder: Path) -> dict:
             per_seed[(r["env_id"], r["variant"], float(r["eval_guidance"]))][int(r["seed"])].append(
                 float(r["final_distance"])
             )
-    return {key: [float(np.mean(v)) for _, v in sorted(s.items())] for key, s in per_seed.items()}
+    return {key: {seed: float(np.mean(v)) for seed, v in sorted(s.items())} for key, s in per_seed.items()}
 
 
 def pct(x: float, decimals: int = 1) -> str:
@@ -216,24 +221,40 @@ def points(x: float, sign: bool = True) -> str:
     return "–" if math.isnan(x) else f"{100 * x:{'+' if sign else ''}.1f} pts"
 
 
+def checkpoint_iteration(run: list[tuple], mark: int) -> tuple | None:
+    """The logged (step, γ_train, kl) of the iteration a run saved its checkpoint of `mark` at: the first whose
+    step reaches the mark (training saves right after it), None where the run has not reached it."""
+    return min((t for t in run if t[0] >= mark), default=None)
+
+
+def record(values_out: list[dict], env: str, variant: str, baseline: str, quantity: str, value: float) -> None:
+    """One number of the report, unrounded, as report.md prints it (percentages in percent): report_values.csv
+    is what the front page's numbers are checked against, so that a number rounded twice is caught."""
+    values_out.append({"env_id": env, "variant": variant, "baseline": baseline, "quantity": quantity,
+                       "value": float(value)})  # fmt: skip
+
+
 def task_section(env: str, means: dict, variants: list[str], rows: list[dict], pooled: dict, heldout: dict,
-                 distance: dict, trajectories: dict) -> list[str]:  # fmt: skip
+                 distance: dict, trajectories: dict, values_out: list[dict]) -> list[str]:  # fmt: skip
     lines = [f"## {env}", ""]
     steps = sorted({s for (e, v, s, g) in means if e == env})
     scheduled = [v for v in variants if trajectories.get((env, v))]
     if scheduled:
-        lines += [("γ_train of the last iteration before each mark (mean over seeds, min–max): where the schedule had "
-                  "taken the guidance."), "", "| variant | " + " | ".join(step_label(s) for s in steps) + " |",
-                  "|---|" + "---|" * len(steps)]  # fmt: skip
+        lines += [("γ_train of each checkpoint's own iteration, the first whose step reaches the mark (mean over seeds, "
+                  "min–max over seeds): where the schedule had taken the guidance."), "",
+                  "| variant | " + " | ".join(step_label(s) for s in steps) + " |", "|---|" + "---|" * len(steps)]  # fmt: skip
         for variant in scheduled:
             cells = []
             for step in steps:
-                last = [
-                    max((t for t in runs if t[0] <= step), default=None)
-                    for runs in trajectories[(env, variant)].values()
-                ]
-                values = [t[1] for t in last if t is not None]
-                cells.append(f"{np.mean(values):.3f} ({min(values):.3f}–{max(values):.3f})" if values else "–")
+                values = [t[1] for t in (checkpoint_iteration(runs, step) for runs in
+                                          trajectories[(env, variant)].values()) if t is not None]  # fmt: skip
+                if values:
+                    summary_of = {"mean": float(np.mean(values)), "min": min(values), "max": max(values)}
+                    for name, value in summary_of.items():
+                        record(values_out, env, variant, "", f"γ_train {name} at {step_label(step)}", value)
+                    cells.append(f"{summary_of['mean']:.3f} ({min(values):.3f}–{max(values):.3f})")
+                else:
+                    cells.append("–")
             lines.append(f"| {paper_name(variant)} | " + " | ".join(cells) + " |")
         lines.append("")
     lines += [("Return at γ = 1, mean ± 95% CI over seeds (seed sd); runs whose return at the last step fell below "
@@ -272,6 +293,8 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
         if last and key in pooled:
             above, below = pooled[key]["above"], pooled[key]["below"]
             gap = pooled[key].get("median_gap")
+            for quantity, value in (("cells above", above), ("cells below", below), ("cells", pooled[key]["cells"])):
+                record(values_out, *key, quantity, value)
             tail = f"| {above} / {below} | " + (
                 f"{pct(gap[0], 2)} [{pct(gap[1], 2)}, {pct(gap[2], 2)}] |" if gap else "– |"
             )
@@ -300,6 +323,9 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
     for variant in variants:
         _, values = response_at_last_step(means, env, variant)
         _, drop = largest_vs_best(values)
+        for g, v in zip(gammas, values):
+            record(values_out, env, variant, "", f"return at γ {g:g} at {step_label(steps[-1])}", v)
+        record(values_out, env, variant, "", f"largest γ vs best at {step_label(steps[-1])} (%)", 100 * drop)
         lines.append(f"| {paper_name(variant)} | " + " | ".join("–" if math.isnan(v) else f"{v:.1f}" for v in values)
                      + f" | {pct(drop)} |")  # fmt: skip
     goal_gammas = sorted({g for (e, v, g) in distance if e == env})
@@ -311,7 +337,7 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
         for variant in variants:
             out = []
             for g in goal_gammas:
-                values = distance.get((env, variant, g))
+                values = list(distance.get((env, variant, g), {}).values())
                 out.append(f"{mean_ci95(values)[0]:.4f} ± {mean_ci95(values)[1]:.4f}" if values else "–")
             lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + " |")
     return [*lines, ""]
@@ -340,36 +366,48 @@ def scheduled_tasks(variants_of: dict) -> list[str]:
     return sorted(e for e, vs in variants_of.items() if SCHEDULE_VARIANTS & set(vs))
 
 
-def seed_falls(means: dict, env: str, variant: str) -> tuple[float, list[float]]:
-    """The variant's best eval γ at the last step (best on the mean over seeds) and each seed's relative fall
-    from it to the largest γ; no falls where either γ is unswept."""
+def seed_falls(means: dict, env: str, variant: str) -> tuple[float, list[float], list[float]]:
+    """The variant's best eval γ at the last step (best on the mean over seeds), each seed's relative fall from
+    it to the largest γ, and each seed's return at it; no falls where either γ is unswept."""
     gammas, values = response_at_last_step(means, env, variant)
     if all(math.isnan(v) for v in values):
-        return math.nan, []
+        return math.nan, [], []
     last, best = last_step(means, env), gammas[int(np.nanargmax(values))]
     cells = cells_of(means, env, variant)
     at_best, at_largest = cells.get((last, best), {}), cells.get((last, gammas[-1]), {})
-    return best, [
-        (at_largest[seed] - at_best[seed]) / abs(at_best[seed]) for seed in sorted(at_best) if seed in at_largest
-    ]
+    falls = [(at_largest[seed] - at_best[seed]) / abs(at_best[seed]) for seed in sorted(at_best) if seed in at_largest]
+    return best, falls, [at_best[seed] for seed in sorted(at_best)]
 
 
-def fall_tests(means: dict, variants_of: dict) -> list[dict]:
-    """Each schedule's per-seed fall against each baseline's: Welch's t, Holm over these tests alone."""
+def welch_of(ours: list[float], theirs: list[float]) -> dict:
+    """Welch's test of two samples: their means, p and the difference one test detects with 80% power."""
+    (m1, s1, n1), (m2, s2, n2) = ((float(np.mean(x)), float(np.std(x, ddof=1)), len(x)) for x in (ours, theirs))
+    return {"mean": m1, "baseline_mean": m2, "p": welch(m1, s1, n1, m2, s2, n2)[2],
+            "detectable": detectable_gap(s1, n1, s2, n2, ALPHA)}  # fmt: skip
+
+
+def fall_tests(means: dict, variants_of: dict, gamma_one_p: list[float] = ()) -> list[dict]:
+    """Each schedule against each baseline, each side at its own best eval γ: the per-seed fall from it to the
+    largest γ, and the per-seed return at it; Welch's t, Holm over each kind's tests alone, and for the falls
+    also Holm over them with the report's γ = 1 tests (`gamma_one_p`), the family the verdict was drawn from."""
     rows = []
     for env in scheduled_tasks(variants_of):
         for variant in (v for v in variants_of[env] if v in SCHEDULE_VARIANTS):
-            best, ours = seed_falls(means, env, variant)
+            best, ours, our_returns = seed_falls(means, env, variant)
             for baseline in (b for b in BASELINES if b in variants_of[env]):
-                baseline_best, theirs = seed_falls(means, env, baseline)
+                baseline_best, theirs, their_returns = seed_falls(means, env, baseline)
                 if len(ours) < 2 or len(theirs) < 2:
                     continue
-                (m1, s1, n1), (m2, s2, n2) = ((np.mean(x), np.std(x, ddof=1), len(x)) for x in (ours, theirs))
+                fall, at_best = welch_of(ours, theirs), welch_of(our_returns, their_returns)
                 rows.append({"env_id": env, "variant": variant, "baseline": baseline, "best": best,
-                             "baseline_best": baseline_best, "fall": m1, "baseline_fall": m2,
-                             "p": welch(m1, s1, n1, m2, s2, n2)[2], "detectable": detectable_gap(s1, n1, s2, n2, ALPHA)})  # fmt: skip
-    for row, p_holm in zip(rows, holm([r["p"] for r in rows])):
-        row["p_holm"] = p_holm
+                             "baseline_best": baseline_best, "fall": fall["mean"], "baseline_fall": fall["baseline_mean"],
+                             "p": fall["p"], "detectable": fall["detectable"], "return": at_best["mean"],
+                             "baseline_return": at_best["baseline_mean"], "return_p": at_best["p"],
+                             "return_detectable": at_best["detectable"]})  # fmt: skip
+    falls = [r["p"] for r in rows]
+    for row, p_holm, p_joint, return_holm in zip(rows, holm(falls), holm([*falls, *gamma_one_p]),
+                                                 holm([r["return_p"] for r in rows])):  # fmt: skip
+        row["p_holm"], row["p_holm_with_gamma_one"], row["return_p_holm"] = p_holm, p_joint, return_holm
     return rows
 
 
@@ -377,7 +415,29 @@ def count_of(seeds: list[int] | None, of: int) -> str:
     return "n/a" if seeds is None else f"{len(seeds)} of {of}"
 
 
-def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
+def distance_tests(distance: dict, variants_of: dict) -> list[dict]:
+    """Each goal task's variants: the final distance to the goal (mean over seeds) at γ = 1, at the closest γ and at
+    the largest, and each seed's change from γ = 1 to the largest, paired by seed (a one-sample t test of the
+    changes; Holm over these tests)."""
+    rows = []
+    for env in sorted({e for (e, v, g) in distance if e in variants_of}):
+        for variant in (v for v in variants_of[env] if (env, v, 1.0) in distance):
+            gammas = sorted(g for (e, v, g) in distance if e == env and v == variant)
+            at_one, at_largest = distance[(env, variant, 1.0)], distance[(env, variant, gammas[-1])]
+            changes = [at_largest[seed] - at_one[seed] for seed in sorted(at_one) if seed in at_largest]
+            values = [float(np.mean(list(distance[(env, variant, g)].values()))) for g in gammas]
+            closest = int(np.argmin(values))
+            rows.append({"env_id": env, "variant": variant, "at_one": values[gammas.index(1.0)],
+                         "closest_gamma": gammas[closest], "closest": values[closest], "largest_gamma": gammas[-1],
+                         "largest": values[-1], "farther": sum(c > 0 for c in changes), "seeds": len(changes),
+                         "p": float(stats.ttest_1samp(changes, 0.0).pvalue) if len(changes) > 1 else math.nan})  # fmt: skip
+    for row, p_holm in zip(rows, holm([r["p"] for r in rows])):
+        row["p_holm"] = p_holm
+    return rows
+
+
+def glance_section(means: dict, variants_of: dict, distance: dict, gamma_one_p: list[float],
+                   values_out: list[dict]) -> list[str]:  # fmt: skip
     """One table per question, the numbers the verdicts rest on; each task's section below has the rest."""
     lines = ["## At a glance", ""]
     scheduled = scheduled_tasks(variants_of)
@@ -397,38 +457,74 @@ def glance_section(means: dict, variants_of: dict, distance: dict) -> list[str]:
                     continue  # a variant not swept at every γ of the task's last step
                 (best, drop), at_one = largest_vs_best(values), values[gammas.index(1.0)]
                 seeds = len(cells[(max(s for s, g in cells), 1.0)])
+                fell = [collapsed(cells), collapsed(cells, every_gamma=True)]
+                for quantity, value in (("return at γ 1", at_one), ("best γ", gammas[best]),
+                                        ("return at best γ", values[best]), ("largest γ", gammas[-1]),
+                                        ("return at largest γ", values[-1]), ("largest γ vs best (%)", 100 * drop),
+                                        ("seeds", seeds), *((f"fell at {at}", len(f)) for at, f in
+                                                            zip(("γ 1", "best γ"), fell) if f is not None)):  # fmt: skip
+                    record(values_out, env, variant, "", quantity, value)
                 lines.append(f"| {env} | {paper_name(variant)} | {at_one:.1f} | {gammas[best]:g}: {values[best]:.1f} | "
-                             f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {count_of(collapsed(cells), seeds)} | "
-                             f"{count_of(collapsed(cells, every_gamma=True), seeds)} |")  # fmt: skip
+                             f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {count_of(fell[0], seeds)} | "
+                             f"{count_of(fell[1], seeds)} |")  # fmt: skip
+        falls = fall_tests(means, variants_of, gamma_one_p)
         lines += ["", ("Is the fall smaller than the baselines'? Each seed's fall at the last mark from its variant's best "
                   "γ (above) to the largest, relative to its return at the best γ, and the mean of these falls (not "
-                  "the ratio of means above); against each baseline's, Welch's t test (Holm over these tests alone), "
-                  "and the difference in falls one test detects with 80% power at α = 0.05, before Holm. A negative "
-                  "difference is a larger fall than the baseline's. A variant whose best γ lies nearer the largest "
-                  "has less room to fall: the best γ of each side is shown."), "",
+                  f"the ratio of means above); against each baseline's, Welch's t test (Holm over these {len(falls)} "
+                  f"tests alone, and over them with the report's {len(gamma_one_p)} γ = 1 tests), and the difference "
+                  "in falls one test detects with 80% power at α = 0.05, before Holm. A negative difference is a "
+                  "larger fall than the baseline's. A variant whose best γ lies nearer the largest has less room to "
+                  "fall: the best γ of each side is shown."), "",
                   ("| task | variant | baseline | best γ (baseline's) | fall | baseline's fall | difference | p (Holm) | "
-                  "detectable difference |"), "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        for r in fall_tests(means, variants_of):
+                  "Holm with the γ = 1 tests | detectable difference |"), "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        record(values_out, "", "", "", "fall tests", len(falls))
+        record(values_out, "", "", "", "γ = 1 tests", len(gamma_one_p))
+        for r in falls:
+            for quantity, value in (("fall (%)", 100 * r["fall"]), ("baseline's fall (%)", 100 * r["baseline_fall"]),
+                                    ("fall difference (pts)", 100 * (r["fall"] - r["baseline_fall"])),
+                                    ("fall p", r["p"]), ("fall p Holm", r["p_holm"]),
+                                    ("fall p Holm with the γ = 1 tests", r["p_holm_with_gamma_one"]),
+                                    ("fall detectable (pts)", 100 * r["detectable"]), ("return at best γ", r["return"]),
+                                    ("baseline's return at its best γ", r["baseline_return"]),
+                                    ("return difference at best γ", r["return"] - r["baseline_return"]),
+                                    ("return at best γ p", r["return_p"]), ("return at best γ p Holm", r["return_p_holm"]),
+                                    ("return at best γ detectable", r["return_detectable"])):  # fmt: skip
+                record(values_out, r["env_id"], r["variant"], r["baseline"], quantity, value)
             lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {r['best']:g} "
                          f"({r['baseline_best']:g}) | {pct(r['fall'])} | {pct(r['baseline_fall'])} | "
                          f"{points(r['fall'] - r['baseline_fall'])} | {fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) | "
-                         f"{points(r['detectable'], sign=False)} |")  # fmt: skip
+                         f"{fmt_p(r['p_holm_with_gamma_one'])} | {points(r['detectable'], sign=False)} |")  # fmt: skip
+        lines += ["", ("Does a schedule cost return at its best γ? The same seeds' returns at each side's best γ (as "
+                  "above): Welch's t test, Holm over these tests alone, and the difference one test detects with 80% "
+                  "power at α = 0.05, before Holm."), "",
+                  ("| task | variant | baseline | best γ (baseline's) | return | baseline's return | difference | "
+                  "p (Holm) | detectable difference |"), "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for r in falls:
+            lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {r['best']:g} "
+                         f"({r['baseline_best']:g}) | {fmt(r['return'])} | {fmt(r['baseline_return'])} | "
+                         f"{fmt(r['return'] - r['baseline_return'])} | {fmt_p(r['return_p'])} "
+                         f"({fmt_p(r['return_p_holm'])}) | {fmt(r['return_detectable'])} |")  # fmt: skip
         lines.append("")
-    goal_envs = sorted({e for (e, v, g) in distance if e in variants_of})
-    if goal_envs:
+    goal = distance_tests(distance, variants_of)
+    if goal:
         lines += [("Does guiding on the goal give a knob that state guidance lacks? The final distance to the goal "
                   "(mean over seeds) at γ = 1, at the eval γ that brings it closest (chosen on these episodes), and "
-                  "at the largest γ swept; intervals are in each task's section."), "",
-                  "| task | variant | γ = 1 | closest γ: distance | largest γ: distance | largest vs γ = 1 |",
-                  "|---|---|---|---|---|---|"]  # fmt: skip
-        for env in goal_envs:
-            for variant in (v for v in variants_of[env] if (env, v, 1.0) in distance):
-                gammas = sorted(g for (e, v, g) in distance if e == env and v == variant)
-                values = [float(np.mean(distance[(env, variant, g)])) for g in gammas]
-                closest, at_one = int(np.argmin(values)), values[gammas.index(1.0)]
-                lines.append(f"| {env} | {paper_name(variant)} | {at_one:.4f} | {gammas[closest]:g}: "
-                             f"{values[closest]:.4f} | {gammas[-1]:g}: {values[-1]:.4f} | "
-                             f"{pct((values[-1] - at_one) / at_one)} |")  # fmt: skip
+                  "at the largest γ swept; then, paired by seed, how many seeds end farther from the goal at the "
+                  "largest γ than at γ = 1, and a t test of the seeds' changes (Holm over these tests); intervals are "
+                  "in each task's section."), "",
+                  ("| task | variant | γ = 1 | closest γ: distance | largest γ: distance | largest vs γ = 1 | "
+                  "seeds farther | p (Holm) |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+        for r in goal:
+            change = (r["largest"] - r["at_one"]) / r["at_one"]
+            for quantity, value in (("distance at γ 1", r["at_one"]), ("closest γ", r["closest_gamma"]),
+                                    ("distance at closest γ", r["closest"]), ("largest γ", r["largest_gamma"]),
+                                    ("distance at largest γ", r["largest"]), ("distance largest vs γ 1 (%)", 100 * change),
+                                    ("seeds farther", r["farther"]), ("seeds", r["seeds"]), ("distance p", r["p"]),
+                                    ("distance p Holm", r["p_holm"])):  # fmt: skip
+                record(values_out, r["env_id"], r["variant"], "", quantity, value)
+            lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {r['at_one']:.4f} | {r['closest_gamma']:g}: "
+                         f"{r['closest']:.4f} | {r['largest_gamma']:g}: {r['largest']:.4f} | {pct(change)} | "
+                         f"{r['farther']} of {r['seeds']} | {fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) |")  # fmt: skip
         lines.append("")
     return lines
 
@@ -487,13 +583,14 @@ def trajectory_figure(trajectories: dict, path: Path) -> None:
     save(fig, axes, path)
 
 
-def distance_figure(distance: dict, path: Path) -> None:
-    envs = sorted({e for (e, v, g) in distance})
+def distance_figure(distance: dict, variants_of: dict, path: Path) -> None:
+    """A panel per goal task, of the variants the report's tables hold (goal_distance.csv may hold more)."""
+    envs = sorted({e for (e, v, g) in distance if e in variants_of})
     fig, axes = panels(len(envs), 3.4)
     for ax, env in zip(axes, envs):
-        for variant in sorted({v for (e, v, g) in distance if e == env}, key=lambda v: (variant_rank(v), v)):
+        for variant in (v for v in variants_of[env] if (env, v, 1.0) in distance):
             gammas = sorted(g for (e, v, g) in distance if e == env and v == variant)
-            band(ax, gammas, [distance[(env, variant, g)] for g in gammas], variant)
+            band(ax, gammas, [list(distance[(env, variant, g)].values()) for g in gammas], variant)
         ax.set_title(f"{env}: final distance to the goal", fontsize=10)
         ax.set(xlabel="eval guidance γ", ylabel="distance (lower is closer)")
     save(fig, axes, path)
@@ -528,6 +625,7 @@ def report(args: Args) -> list[Path]:
         r["p_holm"] = p
     if args.runs is not None:
         write_trajectories(Path(args.runs), folder / "guidance_trajectory.csv")
+    values = []  # every number of the glance tables, the γ-response and γ_train tables and the pooled counts
     heldout, distance, trajectories = (
         read_heldout(folder, Path(args.table_heldout)),
         read_goal_distance(folder),
@@ -537,19 +635,20 @@ def report(args: Args) -> list[Path]:
              (f"Generated by `python benchmarks/beyond_report.py {args.folder} --table {args.table}` from the committed "
              "episode CSVs. Baselines of the paper's tasks come from the continuous table's runs (the same code "
              "class: the same algorithm trained with --compile, MuJoCo 2.3.7, on another CPU); Reacher-v4's are "
-             "trained here."), "", *glance_section(means, variants_of, distance)]  # fmt: skip
+             "trained here."), "", *glance_section(means, variants_of, distance, [r["p"] for r in rows], values)]  # fmt: skip
     for env in envs:
-        lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories)
-    written = [folder / "report.md", folder / "report.csv", folder / "gamma_response.png"]
+        lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories, values)
+    written = [folder / "report.md", folder / "report.csv", folder / "report_values.csv", folder / "gamma_response.png"]
     if trajectories:
         written.append(folder / "guidance_trajectory.png")
         trajectory_figure(trajectories, written[-1])
     if distance:
         written.append(folder / "goal_distance.png")
-        distance_figure(distance, written[-1])
+        distance_figure(distance, variants_of, written[-1])
     write_atomic(written[0], "\n".join(lines))
     write_csv_atomic(written[1], REPORT_COLUMNS, rows)
-    gamma_response_figure(means, envs, variants_of, written[2])
+    write_csv_atomic(written[2], VALUE_COLUMNS, values)
+    gamma_response_figure(means, envs, variants_of, written[3])
     return written
 
 

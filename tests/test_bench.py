@@ -243,9 +243,25 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
     write_rows(tmp_path / "beyond" / "goal_distance.csv",
                [{"env_id": "Reacher-v4", "variant": "pgg_g1.1_goal", "seed": seed, "eval_guidance": gamma,
                  "final_distance": d + 0.01 * seed} for gamma, d in distances.items() for seed in (1, 2)])  # fmt: skip
+    # γ_train logged at each iteration's step; the checkpoints of 200k and 1M are saved after the iterations of 200704
+    # and 1001472, the first to reach their marks
+    trajectory = {198_656: 1.0, 200_704: 1.05, 999_424: 1.1, 1_001_472: 1.2}
+    write_rows(tmp_path / "beyond" / "guidance_trajectory.csv",
+               [{"env_id": "Hopper-v4", "variant": "pgg_g1to1.2", "seed": 1, "step": step, "guidance": g, "kl": 0.01}
+                for step, g in trajectory.items()])  # fmt: skip
     args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"),
                               table_heldout=str(tmp_path / "none.csv"))  # fmt: skip
     written = beyond_report.report(args)
+    text = (tmp_path / "beyond" / "report.md").read_text()
+    assert "| PGG, γ_train 1 → 1.2 | 1.050 (1.050–1.050) | 1.200 (1.200–1.200) |" in text
+    with open(tmp_path / "beyond" / "report_values.csv", newline="") as f:
+        values = {
+            (r["env_id"], r["variant"], r["baseline"], r["quantity"]): float(r["value"]) for r in csv.DictReader(f)
+        }
+    assert values[("Reacher-v4", "pgg_g1.1_goal", "", "distance largest vs γ 1 (%)")] == pytest.approx(
+        100 * 0.02 / 0.115
+    )
+    assert values[("Hopper-v4", "pgg_g1to1.2", "", "γ_train mean at 1M")] == 1.2
     text = (tmp_path / "beyond" / "report.md").read_text()
     assert "| Reacher-v4 | PGG, γ_train = 1.1, goal null | 0.1150 | 1.2: 0.0950 | 1.5: 0.1350 | +17.4% |" in text
     assert "| PGG, γ_train 1 → 1.2 | 1M |" not in text  # rows are variant | baseline | step
@@ -294,7 +310,35 @@ def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the
     assert [r["p"] for r in rows] == pytest.approx(p)
     assert [r["p_holm"] for r in rows] == pytest.approx([min(1, 2 * min(p)) if x == min(p) else max(min(1, 2 * min(p)), x)
                                                          for x in p])  # fmt: skip
+    # Holm over the falls and other tests (the report's γ = 1 ones): a family of 2 + 3
+    joint = beyond_report.fall_tests(means, {"Hopper-v4": ["ppo", "pgg_g1.1", "pgg_g1to1.2"]}, [0.5, 0.9, 1e-6])
+    assert [r["p_holm_with_gamma_one"] for r in joint] == pytest.approx(beyond_report.holm([*p, 0.5, 0.9, 1e-6])[:2])
+    assert [r["p_holm"] for r in joint] == [r["p_holm"] for r in rows]  # the falls' own family is unchanged
+    # the return at each side's own best γ: 1.2 for the schedule, 1 for PPO, 1.2 for the constant
+    at_best = [stats.ttest_ind(returns["pgg_g1to1.2"][1.2], returns[b][g], equal_var=False).pvalue
+               for b, g in (("ppo", 1.0), ("pgg_g1.1", 1.2))]  # fmt: skip
+    assert [r["return"] - r["baseline_return"] for r in rows] == pytest.approx([37.5, -62.5])
+    assert [r["return_p"] for r in rows] == pytest.approx(at_best)
+    assert [r["return_p_holm"] for r in rows] == pytest.approx(beyond_report.holm(at_best))
     assert beyond_report.collapsed({(1_000_000, 1.0): {1: -40.0}, (200_000, 1.0): {1: -60.0}}) is None  # costs
+
+
+def test_beyond_report_pairs_goal_distances_by_seed_and_draws_only_the_variants_its_tables_hold(monkeypatch, tmp_path):
+    """Each seed's change in distance from γ = 1 to the largest γ, paired by seed (a seed missing at one γ is left
+    out), a one-sample t test of the changes; a variant of goal_distance.csv that no table holds is not drawn."""
+    import beyond_report
+    from scipy import stats
+
+    distance = {("Reacher-v4", "ppo", 1.0): {1: 0.1, 2: 0.2, 3: 0.3, 4: 0.2},
+                ("Reacher-v4", "ppo", 1.5): {1: 0.15, 2: 0.18, 3: 0.4},
+                ("Reacher-v4", "pgg_drop0.1", 1.0): {1: 0.1}, ("Reacher-v4", "pgg_drop0.1", 1.5): {1: 0.3}}  # fmt: skip
+    (row,) = beyond_report.distance_tests(distance, {"Reacher-v4": ["ppo"]})
+    assert (row["farther"], row["seeds"]) == (2, 3)
+    assert row["p"] == pytest.approx(stats.ttest_1samp([0.05, -0.02, 0.1], 0.0).pvalue) and row["p_holm"] == row["p"]
+    drawn = []
+    monkeypatch.setattr(beyond_report, "band", lambda ax, xs, values, variant: drawn.append(variant))
+    beyond_report.distance_figure(distance, {"Reacher-v4": ["ppo"]}, tmp_path / "goal_distance.png")
+    assert drawn == ["ppo"]
 
 
 def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
@@ -317,7 +361,7 @@ def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observati
 
 
 def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
-    """results/beyond/report.md and report.csv regenerate from the committed CSVs alone: a changed script or CSV
+    """results/beyond/report.md, report.csv and report_values.csv regenerate from the committed CSVs alone: a changed script or CSV
     whose report was not rewritten fails here. Floats are compared to 1e-9 (another CPU may round a sum
     differently); the report's rounded text exactly, but for its line naming the folder."""
     import beyond_report
@@ -333,11 +377,12 @@ def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
     assert [line for line in ours if not line.startswith("Generated by")] == [
         line for line in committed if not line.startswith("Generated by")
     ]
-    with open(tmp_path / "report.csv", newline="") as f, open(beyond / "report.csv", newline="") as g:
-        for mine, theirs in zip(csv.DictReader(f), csv.DictReader(g), strict=True):
-            assert mine.keys() == theirs.keys()
-            for key in mine:
-                try:
-                    assert float(mine[key]) == pytest.approx(float(theirs[key]), rel=1e-9, nan_ok=True)
-                except ValueError:
-                    assert mine[key] == theirs[key]
+    for name in ("report.csv", "report_values.csv"):
+        with open(tmp_path / name, newline="") as f, open(beyond / name, newline="") as g:
+            for mine, theirs in zip(csv.DictReader(f), csv.DictReader(g), strict=True):
+                assert mine.keys() == theirs.keys()
+                for key in mine:
+                    try:
+                        assert float(mine[key]) == pytest.approx(float(theirs[key]), rel=1e-9, nan_ok=True)
+                    except ValueError:
+                        assert mine[key] == theirs[key]

@@ -1,3 +1,4 @@
+import csv
 import re
 import subprocess
 import sys
@@ -75,23 +76,73 @@ def test_the_readmes_trained_agent_snippet_runs():
     assert float(proc.stdout.strip()) > 1000  # a trained Hopper at γ = 1.2 hops
 
 
-NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?![\w.])")
+NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?!\w|\.\d)")  # a number may end a sentence
 
 
-def rounds_from(text: str, values: list[float]) -> bool:
-    """Whether `text` (a number as written) is one of `values` rounded to as many decimals as it shows."""
+def rounds_from(text: str, value: float) -> bool:
+    """Whether `text` (a number as written, its sign left to the words) is `value` rounded to as many decimals
+    as it shows: the rounding of the unrounded value, not of a figure already rounded (62.47 is 62, not 63)."""
     decimals = len(text.partition(".")[2])
-    return any(abs(v - float(text)) <= 0.5 * 10**-decimals + 1e-9 for v in values)
+    return abs(abs(value) - float(text)) < 0.5 * 10**-decimals + 1e-12
 
 
-def test_the_readmes_beyond_the_paper_numbers_come_from_its_report():
-    """Each number in the README's "Beyond the paper" section rounds from one in results/beyond/report.md,
-    so a report regenerated with other figures fails this until the front page follows. It cannot tell
-    which cell a number came from: a figure quoted for the wrong variant passes where the report holds
-    it elsewhere, and a small integer matches almost anything."""
+# The report_values.csv row (task, variant, baseline, quantity) of each number of the README's "Beyond the
+# paper" section, in the order written; None for a label: a number of a variant's name or an eval γ.
+H, W, U, P, R = "Hopper-v4", "Walker2d-v4", "Humanoid-v4", "Pusher-v4", "Reacher-v4"
+LIN, ADA, CON, PPO, GOAL = "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1", "ppo", "pgg_g1.1_goal"
+FALL = "largest γ vs best (%)"
+BEYOND_SOURCES = [
+    (H, LIN, "", "seeds"), None,  # 5 seeds; γ = 1.5
+    *((env, v, "", FALL) for env in (H,) for v in (LIN, ADA, CON, PPO)),
+    *((env, v, "", FALL) for env in (W, U) for v in (LIN, ADA, CON, PPO)),
+    (U, LIN, PPO, "fall difference (pts)"), (U, LIN, PPO, "fall p Holm"), ("", "", "", "fall tests"),
+    (U, LIN, PPO, "fall p Holm with the γ = 1 tests"), ("", "", "", "γ = 1 tests"), None,
+    (U, LIN, CON, "fall p"), (U, LIN, CON, "fall p Holm"),
+    *((U, v, "", "return at best γ") for v in (LIN, PPO, CON)),
+    (U, LIN, PPO, "return at best γ p"), (U, LIN, CON, "return at best γ p"), (U, LIN, "", "seeds"),
+    (U, LIN, CON, "fall detectable (pts)"), (W, LIN, CON, "fall detectable (pts)"),
+    *((env, v, "", "best γ") for v in (LIN, PPO, CON) for env in (H, W, U)),
+    (U, LIN, "", "return at γ 1.15 at 1M"), (U, LIN, "", "return at γ 1.1 at 1M"), None, None,  # γ 1.05 to 1.3
+    (W, LIN, "", "fell at γ 1"), (W, LIN, "", "seeds"), None,
+    (U, ADA, "", "γ_train mean at 1M"), (H, ADA, "", "γ_train mean at 1M"),
+    (U, ADA, "", "γ_train min at 1M"), (H, ADA, "", "γ_train max at 1M"),
+    None, None,  # γ = 1 to 1.5
+    *((R, v, "", f"distance at {at}") for v in (GOAL, CON, PPO) for at in ("γ 1", "largest γ")),
+    (R, CON, "", "seeds farther"), (R, CON, "", "seeds"), (R, CON, "", "distance p"),
+    (R, GOAL, "", "seeds farther"), (R, GOAL, "", "seeds"), (R, GOAL, "", "distance p"),
+    (R, PPO, "", "seeds farther"), (R, PPO, "", "seeds"), (R, PPO, "", "distance p"),
+    (R, GOAL, PPO, "cells above"), (R, GOAL, PPO, "cells"), None, None,  # γ = 1; γ = 1.5
+    (P, GOAL, "", "distance largest vs γ 1 (%)"), (P, PPO, "", "distance largest vs γ 1 (%)"),
+]  # fmt: skip
+
+
+def beyond_numbers_unsupported(section: str, values: dict, labels: set[float]) -> list[str]:
+    """The numbers of `section` that are not the rounding of the value BEYOND_SOURCES names for them."""
+    quoted = NUMBER.findall(LINK.sub("", section))  # paths are no figures
+    if len(quoted) != len(BEYOND_SOURCES):
+        return [f"{len(quoted)} numbers, {len(BEYOND_SOURCES)} sources: {quoted}"]
+    wrong = []
+    for text, source in zip(quoted, BEYOND_SOURCES):
+        if source is None and float(text) not in labels:
+            wrong.append(f"{text}: no label")
+        elif source is not None and not (source in values and rounds_from(text, values[source])):
+            wrong.append(f"{text}: {source} is {values.get(source)}")
+    return wrong
+
+
+def test_the_readmes_beyond_the_paper_numbers_are_the_roundings_of_the_reports_values():
+    """Each number in the README's "Beyond the paper" section is the correct rounding of the unrounded value
+    (results/beyond/report_values.csv) it quotes, named in BEYOND_SOURCES: a report regenerated with other
+    figures, a number rounded twice (from report.md's text) or quoted from the wrong cell fails here."""
+    from pgg_utils.paper import BEYOND_VARIANTS, paper_name
+
+    with open(ROOT / "results" / "beyond" / "report_values.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    values = {(r["env_id"], r["variant"], r["baseline"], r["quantity"]): float(r["value"]) for r in rows}
+    gammas = {float(m) for r in rows for m in re.findall(r"^return at γ ([\d.]+) at", r["quantity"])}
+    names = " ".join(paper_name(v) for v in [*BEYOND_VARIANTS, "ppo", "pgg_g1.1"])
+    labels = gammas | {float(x) for x in NUMBER.findall(names)}
     readme = (ROOT / "README.md").read_text()
-    section = LINK.sub("", readme.split("## Beyond the paper\n", 1)[1].split("\n## ", 1)[0])  # paths are no figures
-    reported = [float(x) for x in NUMBER.findall((ROOT / "results" / "beyond" / "report.md").read_text())]
-    quoted = NUMBER.findall(section)
-    assert len(quoted) > 10 and not rounds_from("123456.7", reported)
-    assert not [x for x in quoted if not rounds_from(x, reported)]
+    section = readme.split("## Beyond the paper\n", 1)[1].split("\n## ", 1)[0]
+    assert not beyond_numbers_unsupported(section, values, labels)
+    assert rounds_from("62", -62.47) and not rounds_from("63", -62.47) and not rounds_from("16", 15.48)
