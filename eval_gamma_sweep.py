@@ -190,7 +190,7 @@ def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_
 
 
 def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
-    horizon = env.spec.max_episode_steps if env.spec and env.spec.max_episode_steps else 10_000
+    horizon = env.spec.max_episode_steps  # every swept task has one (evaluation_of)
     size = ckpt["n_actions"] if ckpt["action_space"] == "discrete" else ckpt["action_dim"]
     return horizon, size
 
@@ -308,6 +308,10 @@ def run_job(job: Job) -> JobResult:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     policy = GuidedPolicy(agent, ckpt, uniform_null)
     returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
+    if not np.isfinite(returns).all():
+        bad = np.flatnonzero(~np.isfinite(returns))
+        return JobResult(job, None, [], 0, f"{job.checkpoint}: episode {bad[0]} at γ = {job.gamma:g} returned "
+                                           f"{returns[bad[0]]} (a non-finite reward); none of its cells is tabled")  # fmt: skip
     common = {
         "env_id": ckpt["env_id"],
         "variant": fields["variant"],
@@ -480,7 +484,11 @@ def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_co
             raise ValueError(f"cannot make environment {ckpt['env_id']!r} ({type(e).__name__}: "
                              f"{str(e).splitlines()[0] if str(e) else ''})") from None  # fmt: skip
         task_code[key] = scripts.task_sources(ckpt["env_id"], env)
+        bounded = env.spec is not None and env.spec.max_episode_steps
         env.close()
+        if not bounded:
+            raise ValueError(f"{ckpt['env_id']} has no time limit (max_episode_steps), so an episode may never end; "
+                             "register it with one, e.g. gym.register(..., max_episode_steps=1000)")  # fmt: skip
     script_sha1 = scripts.file_sha1(script)
     trained_sha1 = ckpt.get("code", {}).get("script_sha1")
     same = "unknown" if trained_sha1 is None else "yes" if trained_sha1 == script_sha1 else "no"
@@ -554,12 +562,10 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
                 except ValueError as e:
                     print(f"re-evaluating {path}: {e}", file=sys.stderr)
         print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {len(finished)} already done", file=sys.stderr)
-        changed = evaluate_missing(args, output, stack, cells, finished, skipped, evaluations)
-        for checkpoint in sorted(changed):
-            skipped.append(f"{checkpoint}: rewritten during the sweep; rerun the sweep to evaluate its new contents")
+        withheld = evaluate_missing(args, output, stack, cells, finished, skipped, evaluations)
         rows = []
         for (checkpoint, _), cell_rows in finished.items():
-            if checkpoint not in changed:
+            if checkpoint not in withheld:
                 # The label of today's rule: a cell written before the rule changed keeps its numbers but
                 # must not split its run from the cells written after.
                 rows.extend({**{c: row[c] for c in EPISODE_COLUMNS}, "config": labels[checkpoint]} for row in cell_rows)
@@ -568,7 +574,7 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
         write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
         write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
         write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
-        evaluated = [evaluations[c].record | {"config": labels[c]} for c in sorted(evaluations) if c not in changed]
+        evaluated = [evaluations[c].record | {"config": labels[c]} for c in sorted(evaluations) if c not in withheld]
         write_csv_atomic(output / "evaluated_by.csv", EVALUATED_BY_COLUMNS, evaluated)
     except KeyboardInterrupt:
         raise SweepInterrupted(
@@ -594,7 +600,8 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
 def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finished: dict, skipped: list[str],
                      evaluations: dict) -> set[Path]:  # fmt: skip
     """Evaluates the cells not in `finished`, writing each as it finishes and adding its rows to
-    `finished`; returns the checkpoints whose bytes changed since `cells` was planned."""
+    `finished`; returns the checkpoints none of whose cells may be reported, each said in `skipped`: those
+    of a cell that failed, and those whose bytes changed since `cells` was planned."""
     settings = settings_of(args)
     missing = [cell for cell in cells if cell not in finished]
     jobs = [Job(checkpoint, gamma, settings, stack, evaluations[checkpoint].script, evaluations[checkpoint].evaluator)
@@ -602,7 +609,7 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
     if not jobs:
         return set()
     progress = Progress(label="sweep", total=len(jobs), unit="cells", interval=0, stream=sys.stderr)
-    handled, env_steps, start, changed, pool, broken = 0, 0, time.time(), set(), None, False
+    handled, env_steps, start, failed, changed, pool, broken = 0, 0, time.time(), {}, set(), None, False
     try:
         if args.workers > 1 and len(jobs) > 1:
             pool, futures, processes = start_pool(min(args.workers, len(jobs)), jobs)
@@ -611,8 +618,8 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
             results = map(run_job, jobs)
         for result in results:
             job, handled = result.job, handled + 1
-            if result.error:
-                skipped.append(result.error)
+            if result.error:  # none of the checkpoint's cells is reported: its rows would be partial
+                failed.setdefault(job.checkpoint, result.error)
             else:
                 # Named by the bytes that were evaluated. A checkpoint rewritten since the plan keeps its new
                 # cell for a later sweep; this sweep reports none of its cells (they could mix two files).
@@ -633,7 +640,10 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
             stop_pool(pool, processes)
     if broken:
         raise WorkerDied(f"a sweep worker died ({how_workers_died(processes)}) and the cells in flight with it")
-    return changed
+    skipped.extend(failed.values())
+    rewritten = sorted(changed - failed.keys())
+    skipped.extend(f"{c}: rewritten during the sweep; rerun the sweep to evaluate its new contents" for c in rewritten)
+    return failed.keys() | changed
 
 
 # --- watching the knob: videos of one checkpoint at several γ ----------------------------------------

@@ -12,6 +12,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch
@@ -19,6 +20,7 @@ from conftest import ROOT, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
+import ppo_pgg_discrete
 from pgg_utils import files, identity, runs, stats
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -254,3 +256,85 @@ def test_fixture_checkpoints_of_both_formats_load_and_sweep_to_finite_returns(tm
     without_code = {key: value for key, value in ckpt.items() if key != "code"}
     code = {"commit": "0" * 40, "modified": True, "sha1": "1" * 40}
     assert identity.config_label({**ckpt, "code": code}) == identity.config_label(without_code) == label
+
+
+# --- a task that changed or went away after training -----------------------------------------------------
+
+TASK = """
+import math
+
+import gymnasium as gym
+import gymnasium as gym
+import numpy as np
+
+
+class Walk(gym.Env):
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.zeros(2, np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        reward = math.nan if NAN_AT == self.t else 1.0
+        return self.np_random.normal(size=2).astype(np.float32), reward, False, self.t >= 30, {}
+
+
+gym.register("FaultWalk-v0", entry_point=Walk, **REGISTER)
+"""
+
+
+def trained_on_custom_task(tmp_path, monkeypatch, nan_at=None, register="max_episode_steps=30") -> Path:
+    """A tiny discrete run on a task of a module of its own, then that module rewritten for the sweep:
+    NaN rewards from step `nan_at`, or registered with `register` (its time limit)."""
+    module = tmp_path / "tasks" / "fault_walk_task.py"
+    module.parent.mkdir(parents=True, exist_ok=True)
+    module.write_text("NAN_AT = None\nREGISTER = dict(max_episode_steps=30)\n" + TASK)
+    monkeypatch.syspath_prepend(str(module.parent))
+    forget_task()
+    args = tiny_discrete_args(tmp_path, "fault_walk_task:FaultWalk-v0")
+    run_dir = train(ppo_pgg_discrete, args)
+    module.write_text(f"NAN_AT = {nan_at}\nREGISTER = dict({register})\n" + TASK)
+    forget_task()
+    return run_dir
+
+
+def forget_task() -> None:
+    """Drops the task's module and registration from this process, as a new process would start."""
+    sys.modules.pop("fault_walk_task", None)
+    gym.registry.pop("FaultWalk-v0", None)
+
+
+def tiny_discrete_args(tmp_path, env_id: str):
+    return ppo_pgg_discrete.Args(env_id=env_id, output_dir=str(tmp_path / "runs"), total_timesteps=512,
+                                 checkpoint_interval=512, num_steps=64)  # fmt: skip
+
+
+def test_nan_returns_are_never_written_as_results(tmp_path, monkeypatch):
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch, nan_at=3)
+    with pytest.raises(files.InputError, match="no checkpoint could be evaluated"):
+        sweep.sweep(sweep_args(tmp_path / "out", run_dir, episodes=4))
+    (skipped,) = files.read_csv(tmp_path / "out" / "skipped.csv")
+    assert "returned nan (a non-finite reward); none of its cells is tabled" in skipped["reason"]
+    assert "nan" not in (tmp_path / "out" / "episodes.csv").read_text()
+
+
+def test_a_task_without_a_time_limit_is_refused_in_one_line_before_any_episode(tmp_path, monkeypatch):
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch, register="")
+    evaluated = count_jobs(monkeypatch)
+    with pytest.raises(files.InputError, match="no checkpoint could be evaluated"):
+        sweep.sweep(sweep_args(tmp_path / "out", run_dir, episodes=4))
+    (skipped,) = files.read_csv(tmp_path / "out" / "skipped.csv")
+    assert "has no time limit (max_episode_steps)" in skipped["reason"] and not evaluated
+
+
+def test_a_task_whose_module_is_gone_is_skipped_in_one_line(tmp_path, monkeypatch):
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch)
+    (tmp_path / "tasks" / "fault_walk_task.py").unlink()
+    proc = subprocess.run([sys.executable, str(ROOT / "eval_gamma_sweep.py"), str(run_dir), "--output",
+                           str(tmp_path / "out"), "--episodes", "2"], capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
+    assert "cannot make environment 'fault_walk_task:FaultWalk-v0' (ModuleNotFoundError" in proc.stderr
