@@ -324,7 +324,7 @@ def run_job(job: Job) -> JobResult:
         "global_step": ckpt["global_step"],
         "eval_guidance": job.gamma,
         "policy": "deterministic" if deterministic else "sample",
-        "null_branch": "uniform" if uniform_null else "learned",
+        "null_branch": "uniform" if uniform_null else "bc" if ckpt.get("null_fit") else "learned",
         **dict(zip(STACK_COLUMNS, job.stack)),
         "action_space": ckpt["action_space"],
     }

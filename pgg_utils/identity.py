@@ -111,6 +111,7 @@ def run_name(args) -> str:
 def config_label(ckpt: dict) -> str:
     """A checkpoint's configuration as a label, the key every reader pools runs by: its variant,
     `script=<file>` where a script other than the repository's own for its action space trained it,
+    `null=bc` where its null embedding was fitted after training (pgg_utils.bc_null),
     every training argument that differs from its default (training_words),
     then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint
     records no package versions (format 1), so that it is never pooled with runs whose stack is known.
@@ -120,6 +121,8 @@ def config_label(ckpt: dict) -> str:
     words = [variant_id(args)]
     if not scripts.is_original(ckpt):
         words.append(f"script={scripts.script_name(ckpt)}")
+    if ckpt.get("null_fit"):  # a null embedding fitted after training (pgg_utils.bc_null), not the trained one
+        words.append("null=bc")
     words += training_words(ckpt)
     versions = ckpt.get("versions")
     if not versions:

@@ -1,0 +1,147 @@
+"""A behaviour-cloned unconditional branch for any trained agent, without retraining: the null embedding
+fitted by maximum likelihood to the actions of the agent's own episodes, the rest of the network frozen.
+The result is a checkpoint like any other, swept like any other; it records the fit (`null_fit`), and
+its configuration and the sweep's `null_branch` column name it (`null=bc`, `bc`), so it is never pooled
+with the agent's learned or zero null.
+
+    python -m pgg_utils.bc_null results/continuous/agents --steps 1000000 --output runs/bc_null
+    python eval_gamma_sweep.py runs/bc_null --output runs/sweeps/bc_null
+
+The episodes are the agent's own policy at γ = 1 (its conditional policy), sampled, from reset seeds
+`episode_seed + k` (30000 and up by default: apart from the sweep's 10000 and the held-out sweep's
+20000). Continuous: the Gaussian likelihood of the sampled (unclipped) actions under N(mu_null, σ), σ
+the agent's; its maximum puts mu_null at the mean action over the visited states, as near as the
+frozen actor can reach. Discrete: the categorical likelihood of the sampled actions under
+softmax(logits_null): the action frequencies."""
+
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import tyro
+
+from pgg_utils import runs, scripts
+from pgg_utils.files import InputError, one_line_errors, write_atomic
+
+BC_FIT = "behaviour cloning"
+
+
+@dataclass
+class Args:
+    paths: tyro.conf.Positional[tuple[str, ...]]
+    """run directories, roots to search for them, or checkpoint files"""
+    output: str = "bc_null"
+    """folder of the fitted checkpoints: <run>__bcnull/checkpoints/step_*.pt"""
+    steps: tuple[int, ...] | None = None
+    """only the checkpoints of these step marks; None: all"""
+    episodes: int = 10
+    """episodes of the agent's own policy to fit to"""
+    episode_seed: int = 30_000
+    """episode k resets with seed episode_seed + k, its action noise from that seed too"""
+    fit_steps: int = 500
+    """Adam steps on the null embedding (full batch)"""
+    learning_rate: float = 0.05
+    """Adam's learning rate"""
+    script: tuple[str, ...] = ()
+    """training scripts to load with besides the repository's (as eval_gamma_sweep.py --script)"""
+
+
+def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(raw observations, sampled actions) of `episodes` episodes of the agent's policy at γ = 1, all
+    stepping together; continuous actions before clipping to the bounds (the policy's own samples)."""
+    envs = [make_env() for _ in range(episodes)]
+    rngs = [np.random.default_rng([episode_seed + k, 2]) for k in range(episodes)]
+    obs = np.stack([env.reset(seed=episode_seed + k)[0] for k, env in enumerate(envs)])
+    running, seen_obs, seen_actions = np.ones(episodes, dtype=bool), [], []
+    with torch.no_grad():
+        while running.any():
+            rows = np.flatnonzero(running)
+            if ckpt["action_space"] == "discrete":
+                logits = agent.acting_logits(obs[rows].astype(np.float32), 1.0)
+                gumbel = np.stack([rngs[i].gumbel(size=logits.shape[-1]) for i in rows])
+                actions = (logits + gumbel).argmax(-1)
+                env_actions = actions
+            else:
+                mean = agent.acting_mean(obs[rows], 1.0)
+                noise = np.stack([rngs[i].standard_normal(mean.shape[-1]) for i in rows])
+                actions = mean + agent.actor_logstd.exp()[0].numpy() * noise
+                env_actions = np.clip(actions, *agent.action_bounds) if agent.action_bounds is not None else actions
+            seen_obs.append(obs[rows].copy())
+            seen_actions.append(actions)
+            for j, i in enumerate(rows):
+                obs[i], _, terminated, truncated, _ = envs[i].step(env_actions[j])
+                running[i] = not (terminated or truncated)
+    for env in envs:
+        env.close()
+    return np.concatenate(seen_obs), np.concatenate(seen_actions)
+
+
+def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rate: float) -> tuple[torch.Tensor, float]:
+    """(the null embedding that maximises the likelihood of `actions` under pi(.|null), the final mean
+    negative log-likelihood per action, constants included). Only the null embedding moves."""
+    null = agent.null_obs.detach().clone().zero_().requires_grad_(True)
+    optimizer = torch.optim.Adam([null], lr=learning_rate)
+    for parameter in agent.parameters():
+        parameter.requires_grad_(False)
+    if kind == "discrete":
+        targets = torch.as_tensor(actions, dtype=torch.long)
+        nll = lambda: torch.nn.functional.cross_entropy(agent.actor(null[None]).expand(len(targets), -1), targets)
+    else:
+        targets, log_std = torch.as_tensor(actions, dtype=torch.float32), agent.actor_logstd[0]
+        constant = float(log_std.sum()) + 0.5 * math.log(2 * math.pi) * len(log_std)
+        nll = lambda: 0.5 * ((targets - agent.actor_mean(null[None])) / log_std.exp()).square().sum(-1).mean() + constant
+    for _ in range(fit_steps):
+        optimizer.zero_grad()
+        loss = nll()
+        loss.backward()
+        optimizer.step()
+    with torch.no_grad():
+        return null.detach(), float(nll())
+
+
+def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
+    """The checkpoint of `path` with its null embedding behaviour-cloned, and the fit recorded."""
+    ckpt = runs.read_checkpoint_file(path)
+    if ckpt.get("null_fit"):
+        raise ValueError("already holds a fitted null branch")
+    if ckpt["args"].get("null_dims") is not None:
+        raise ValueError("its null embedding replaces some observation dimensions only (--null-dims): "
+                         "its unconditional branch depends on the state, which this fit does not model")  # fmt: skip
+    agent, module, _ = scripts.load_agent(ckpt, path, given)
+    obs, actions = own_episodes(agent, ckpt, module.make_env(ckpt["env_id"]), args.episodes, args.episode_seed)
+    null, nll = fit_null(agent, ckpt["action_space"], actions, args.fit_steps, args.learning_rate)
+    fit = {"method": BC_FIT, "episodes": args.episodes, "episode_seed": args.episode_seed, "actions": len(actions),
+           "fit_steps": args.fit_steps, "learning_rate": args.learning_rate, "nll": nll,
+           "source": str(path), "source_null_norm": float(ckpt["model"]["null_obs"].norm())}  # fmt: skip
+    return {**ckpt, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
+
+
+def main() -> None:
+    args = tyro.cli(Args, description=__doc__)
+    with one_line_errors():
+        if args.episodes <= 0 or args.fit_steps <= 0 or not args.learning_rate > 0:
+            raise InputError("--episodes, --fit-steps and --learning-rate must be positive")
+        torch.set_num_threads(1)
+        given, written = tuple(Path(p).resolve() for p in args.script), 0
+        for path in runs.find_checkpoints(args.paths, args.steps):
+            destination = Path(args.output) / f"{path.parent.parent.name}__bcnull" / "checkpoints" / path.name
+            if destination.exists():
+                print(f"{destination} exists; kept", file=sys.stderr)
+                continue
+            try:
+                ckpt = fitted_checkpoint(path, args, given)
+            except ValueError as e:
+                print(f"skipped {path}: {e}", file=sys.stderr)
+                continue
+            write_atomic(destination, runs.checkpoint_bytes(ckpt))
+            fit = ckpt["null_fit"]
+            print(f"{destination}: {fit['actions']} actions, NLL {fit['nll']:.4f}", file=sys.stderr)
+            written += 1
+        print(f"wrote {written} checkpoint(s) to {args.output}")
+
+
+if __name__ == "__main__":
+    main()
