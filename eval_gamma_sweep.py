@@ -69,7 +69,7 @@ import tyro
 from pgg_utils import runs, scripts
 from pgg_utils.arguments import DEFAULT_GAMMAS, guidance_error
 from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
-from pgg_utils.fast import MIN_FORWARD_ROWS
+from pgg_utils.fast import MIN_FORWARD_ROWS, standard_gumbel
 from pgg_utils.files import (
     InputError,
     LockedError,
@@ -185,7 +185,7 @@ def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_
     rng = np.random.default_rng([eval_seed + episode, 1])
     if kind == "discrete":
         uniform = rng.uniform(np.finfo(np.float32).tiny, 1.0, size=(horizon, action_size))
-        return (-np.log(-np.log(uniform))).astype(np.float32)
+        return standard_gumbel(uniform).astype(np.float32)
     return rng.standard_normal(size=(horizon, action_size)).astype(np.float32)
 
 

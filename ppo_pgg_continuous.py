@@ -33,11 +33,10 @@ import tyro
 from torch import nn
 
 from pgg_utils import runs
-from pgg_utils.arguments import RunArgs
+from pgg_utils.arguments import RunArgs, acting_error
 from pgg_utils.fast import (
     evaluation_forward,
     flatten_parameters,
-    guidance_coefficients,  # PGG
     numpy_network,
 )
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
@@ -87,7 +86,7 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
     reward_clip: float = 10.0
     """normalised rewards are clipped to [-reward_clip, reward_clip]"""
     null_dims: tuple[int, ...] | None = None  # PGG
-    """observation indices the null embedding replaces (e.g. a goal's: Reacher-v4 4 5 8 9 10, Pusher-v4 20 21 22); None: all, the paper's"""  # PGG
+    """observation indices the null embedding replaces (e.g. a goal's: Reacher-v4 4 5 8 9 10, Pusher-v4 20 21 22); None: all, the paper's"""
     checkpoint_interval: int = 200_000
     """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
 
@@ -253,9 +252,9 @@ class Agent(nn.Module):
         return self.actor_mean(self.null_obs.unsqueeze(0))[0]  # PGG
 
     def guided_mean(  # PGG
-        self,
-        obs: torch.Tensor,
-        guidance: torch.Tensor | float | None,
+        self,  # PGG
+        obs: torch.Tensor,  # PGG
+        guidance: torch.Tensor | float | None,  # PGG
         drop_mask: torch.Tensor | None = None,  # PGG
     ) -> torch.Tensor:  # PGG
         """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations. `guidance`
@@ -271,7 +270,6 @@ class Agent(nn.Module):
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)  # PGG
         return guide(mean_cond, mean_null, 1.0 if guidance is None else guidance)  # PGG
 
-    @torch.no_grad()  # PGG
     def acting_mean(self, raw_obs: np.ndarray, guidance, mean_null=None) -> np.ndarray:  # PGG
         """The guided mean `act` samples around, float32 numpy, for a batch of raw observations."""
         obs = self.obs_norm.normalise(raw_obs)
@@ -279,9 +277,8 @@ class Agent(nn.Module):
         if self.null_mask is not None:  # PGG: one null input per row
             mean_null = evaluation_forward(self.actor_mean, self.null_input(obs))  # PGG
         elif mean_null is None:  # PGG
-            mean_null = self.unconditional_mean().numpy()  # PGG
-        coef_null, coef_cond = guidance_coefficients(guidance, len(obs))  # PGG
-        return coef_null * mean_null + coef_cond * mean_cond  # PGG
+            mean_null = self.unconditional_mean().detach().numpy()  # PGG
+        return guide(mean_cond, mean_null, guidance)  # PGG
 
     @torch.no_grad()
     def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:  # PGG
@@ -289,8 +286,12 @@ class Agent(nn.Module):
         observations (one, or a batch): normalised inside, sampled with standard normal `noise` shaped
         like the actions (drawn from torch's generator if None) or the mean if `deterministic`, and
         clipped to the task's bounds. `mean_null`: the unconditional mean where the caller holds it
-        (the sweep computes it once). The sweep acts through this method."""
+        (the sweep computes it once). The sweep acts through this method. ValueError, one line, for a
+        guidance outside training's rule ([0, 1000]) or an observation holding a NaN or an infinity."""
         raw = np.asarray(raw_obs, dtype=np.float64)
+        guidance = np.asarray(guidance, dtype=np.float64)  # PGG
+        if error := acting_error(raw, guidance):  # PGG: training's and the sweep's guidance rule
+            raise ValueError(error)
         single = raw.ndim == 1
         mean = self.acting_mean(raw[None] if single else raw, guidance, mean_null)  # PGG
         if not deterministic:
@@ -310,12 +311,15 @@ def make_agent(args: dict, shapes: dict) -> Agent:
 
 
 def guide(cond, null, guidance):  # PGG
-    """The guided branch (1-γ)·null + γ·cond. For numpy arrays (rollouts) that formula; for torch
-    tensors (updates) torch.lerp(null, cond, γ), one op in place of three with their backward, which
-    computes the same mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit)."""
+    """The guided branch (1-γ)·null + γ·cond, the one place it is computed. For torch tensors (updates):
+    torch.lerp(null, cond, γ), one op in place of three with their backward, which computes the same
+    mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit). For numpy arrays
+    (rollouts, `act`, the sweep): that formula in float32, its two weights rounded to float32 from
+    double; `guidance` a number or one per row of `cond`."""
     if isinstance(cond, torch.Tensor):  # PGG
         return torch.lerp(null, cond, guidance)  # PGG
-    return (1.0 - guidance) * null + guidance * cond  # PGG
+    guidance = np.asarray(guidance, dtype=np.float64)[..., None]  # PGG: a column, for one per row
+    return np.asarray(1.0 - guidance, np.float32) * null + np.asarray(guidance, np.float32) * cond  # PGG
 
 
 def gaussian_log_prob(action, mean, logstd):
@@ -564,7 +568,7 @@ def ppo_update(
             nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], args.max_grad_norm)
             optimizer.step()
 
-        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:  # PGG: the kept rows' KL
+        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:  # the kept rows' KL
             break
 
     y_pred, y_true = batch["values"].numpy(), batch["returns"].numpy()
@@ -613,9 +617,9 @@ def train(args: Args, run: runs.Run) -> None:
     # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
     # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
-    probe = flatten_rollout(Rollout.empty(2, 1, obs_dim, action_dim), torch.zeros(2), torch.zeros(2))  # PGG
-    probe_loss, _ = minibatch_loss(agent, probe, torch.arange(2), None, None, args)  # PGG
-    trains_null = guided or reads_parameter(probe_loss, agent.null_obs)  # PGG
+    null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim, action_dim), torch.zeros(2), torch.zeros(2))  # PGG
+    null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
+    trains_null = guided or reads_parameter(null_probe_loss, agent.null_obs)  # PGG
     trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
@@ -689,6 +693,7 @@ def checkpoint_shapes(envs) -> dict:
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
     runs.require_own(ckpt, ACTION_SPACE, __file__, source)
+    runs.require_finite(ckpt, source)
     low, high = runs.action_bounds(ckpt)
     agent = make_agent(ckpt["args"], {**ckpt, "action_low": low, "action_high": high})
     agent.load_state_dict(ckpt["model"])

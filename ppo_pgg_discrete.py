@@ -31,12 +31,12 @@ import tyro
 from torch import nn
 
 from pgg_utils import runs
-from pgg_utils.arguments import RunArgs
+from pgg_utils.arguments import RunArgs, acting_error
 from pgg_utils.fast import (
     evaluation_forward,
     flatten_parameters,
-    guidance_coefficients,  # PGG
     numpy_network,
+    standard_gumbel,
 )
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
 
@@ -147,9 +147,9 @@ class Agent(nn.Module):
         return self.actor(self.null_obs.unsqueeze(0))[0]  # PGG
 
     def guided_logits(  # PGG
-        self,
-        obs: torch.Tensor,
-        guidance: torch.Tensor | float | None,
+        self,  # PGG
+        obs: torch.Tensor,  # PGG
+        guidance: torch.Tensor | float | None,  # PGG
         drop_mask: torch.Tensor | None = None,  # PGG
     ) -> torch.Tensor:  # PGG
         """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `guidance` None means a run
@@ -164,14 +164,12 @@ class Agent(nn.Module):
             logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)  # PGG
         return guide(logits_cond, logits_null, 1.0 if guidance is None else guidance)  # PGG
 
-    @torch.no_grad()  # PGG
     def acting_logits(self, obs: np.ndarray, guidance, logits_null=None) -> np.ndarray:  # PGG
         """The guided logits `act` samples from, float32 numpy, for a float32 batch `obs`."""
         logits_cond = evaluation_forward(self.actor, obs)
         if logits_null is None:  # PGG
-            logits_null = self.unconditional_logits().numpy()  # PGG
-        coef_null, coef_cond = guidance_coefficients(guidance, len(logits_cond))  # PGG
-        return coef_null * logits_null + coef_cond * logits_cond  # PGG
+            logits_null = self.unconditional_logits().detach().numpy()  # PGG
+        return guide(logits_cond, logits_null, guidance)  # PGG
 
     @torch.no_grad()
     def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:  # PGG
@@ -179,8 +177,12 @@ class Agent(nn.Module):
         (one, or a batch): sampled by the Gumbel-max trick with standard Gumbel `noise` shaped like the
         logits (drawn from torch's generator if None), or the argmax if `deterministic`. `logits_null`:
         the unconditional branch where the caller holds it (the sweep computes it once, or takes zeros
-        for its uniform-null control). The sweep acts through this method."""
+        for its uniform-null control). The sweep acts through this method. ValueError, one line, for a
+        guidance outside training's rule ([0, 1000]) or an observation holding a NaN or an infinity."""
         obs = np.asarray(obs, dtype=np.float32)
+        guidance = np.asarray(guidance, dtype=np.float64)  # PGG
+        if error := acting_error(obs, guidance):  # PGG: training's and the sweep's guidance rule
+            raise ValueError(error)
         single = obs.ndim == 1
         logits = self.acting_logits(obs[None] if single else obs, guidance, logits_null)  # PGG
         if not deterministic:
@@ -196,19 +198,20 @@ def make_agent(args: dict, shapes: dict) -> Agent:
 
 
 def guide(cond, null, guidance):  # PGG
-    """The guided branch (1-γ)·null + γ·cond. For numpy arrays (rollouts) that formula; for torch
-    tensors (updates) torch.lerp(null, cond, γ), one op in place of three with their backward, which
-    computes the same mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit)."""
+    """The guided branch (1-γ)·null + γ·cond, the one place it is computed. For torch tensors (updates):
+    torch.lerp(null, cond, γ), one op in place of three with their backward, which computes the same
+    mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit). For numpy arrays
+    (rollouts, `act`, the sweep): that formula in float32, its two weights rounded to float32 from
+    double; `guidance` a number or one per row of `cond`."""
     if isinstance(cond, torch.Tensor):  # PGG
         return torch.lerp(null, cond, guidance)  # PGG
-    return (1.0 - guidance) * null + guidance * cond  # PGG
+    guidance = np.asarray(guidance, dtype=np.float64)[..., None]  # PGG: a column, for one per row
+    return np.asarray(1.0 - guidance, np.float32) * null + np.asarray(guidance, np.float32) * cond  # PGG
 
 
 def gumbel_noise(*shape: int) -> np.ndarray:
-    """Standard Gumbel noise from torch's generator: argmax(logits + noise) is an exact categorical
-    sample (the Gumbel-max trick), far cheaper than torch.distributions."""
-    uniform = torch.rand(*shape).clamp_min_(np.finfo(np.float32).tiny)
-    return -np.log(-np.log(uniform.numpy()))
+    """Standard Gumbel noise, float32, from torch's generator (Gumbel-max sampling: fast.standard_gumbel)."""
+    return standard_gumbel(torch.rand(*shape).numpy())
 
 
 # --- the behaviour policy, in numpy --------------------------------------------------------------
@@ -225,9 +228,9 @@ class RolloutPolicy:
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor), numpy_network(agent.critic)
         self.guidance = guidance  # PGG
-        with torch.no_grad():
+        with torch.no_grad():  # PGG
             self.logits_null = agent.unconditional_logits().numpy()  # PGG
-        self.n_actions = len(self.logits_null)
+        self.n_actions = len(self.logits_null)  # PGG
 
     def act(self, obs: np.ndarray, gumbel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs`. Actions are sampled by the
@@ -429,7 +432,7 @@ def ppo_update(
             nn.utils.clip_grad_norm_(optimizer.param_groups[0]["params"], args.max_grad_norm)
             optimizer.step()
 
-        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:  # PGG: the kept rows' KL
+        if args.target_kl is not None and stats["losses/approx_kl"] > args.target_kl:  # the kept rows' KL
             break
 
     y_pred, y_true = batch["values"].numpy(), batch["returns"].numpy()
@@ -474,9 +477,9 @@ def train(args: Args, run: runs.Run) -> None:
     # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
     # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
-    probe = flatten_rollout(Rollout.empty(2, 1, obs_dim), torch.zeros(2), torch.zeros(2))  # PGG
-    probe_loss, _ = minibatch_loss(agent, probe, torch.arange(2), None, None, args)  # PGG
-    trains_null = guided or reads_parameter(probe_loss, agent.null_obs)  # PGG
+    null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim), torch.zeros(2), torch.zeros(2))  # PGG
+    null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
+    trains_null = guided or reads_parameter(null_probe_loss, agent.null_obs)  # PGG
     trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
@@ -543,6 +546,7 @@ def checkpoint_shapes(envs) -> dict:
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
     runs.require_own(ckpt, ACTION_SPACE, __file__, source)
+    runs.require_finite(ckpt, source)
     agent = make_agent(ckpt["args"], ckpt)
     agent.load_state_dict(ckpt["model"])
     return agent.eval()

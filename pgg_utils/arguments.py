@@ -1,8 +1,10 @@
 """The arguments every training script shares and the rules they obey, once for the scripts, the
-sweep and the launcher. Plain Python: no torch, no gymnasium."""
+sweep, the launcher and an agent's `act`. No torch, no gymnasium."""
 
 import math
 from dataclasses import dataclass, fields
+
+import numpy as np
 
 from pgg_utils.guidance import SCHEDULES
 
@@ -66,6 +68,20 @@ def guidance_error(value: float, flag: str = "--guidance") -> str | None:
     """The one rule for a guidance strength: training's --guidance (ARGUMENT_RULES), the sweep's --gammas."""
     if not (math.isfinite(value) and 0.0 <= value <= MAX_GUIDANCE):
         return f"{flag} must be a number in [0, {MAX_GUIDANCE:g}], got {value!r}"
+    return None
+
+
+def acting_error(obs: np.ndarray, guidance: np.ndarray) -> str | None:
+    """What an agent's `act` refuses, one line, or None: a guidance strength outside guidance_error's rule
+    (`guidance` a number, or one per row of `obs`), and an observation holding a NaN or an infinity (its
+    action would be NaN, or an arbitrary argmax). A few reductions: the sweep acts through `act` every step."""
+    rows = 1 if obs.ndim == 1 else len(obs)
+    if guidance.ndim > 0 and guidance.shape != (rows,):
+        return f"guidance must be a number or one per observation ({rows}), got an array of shape {guidance.shape}"
+    if error := guidance_error(float(guidance.min()), "guidance") or guidance_error(float(guidance.max()), "guidance"):
+        return error  # a NaN anywhere is the minimum's
+    if not np.isfinite(obs).all():
+        return "the observation holds a NaN or an infinity"
     return None
 
 

@@ -49,13 +49,13 @@ class Args:
     """training scripts to load with besides the repository's (as eval_gamma_sweep.py --script)"""
 
 
-def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """(raw observations, sampled actions) of `episodes` episodes of the agent's policy at γ = 1, all
-    stepping together; continuous actions before clipping to the bounds (the policy's own samples)."""
+def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) -> np.ndarray:
+    """The sampled actions of `episodes` episodes of the agent's policy at γ = 1, all stepping together;
+    continuous actions before clipping to the bounds (the policy's own samples)."""
     envs = [make_env() for _ in range(episodes)]
     rngs = [np.random.default_rng([episode_seed + k, 2]) for k in range(episodes)]
     obs = np.stack([env.reset(seed=episode_seed + k)[0] for k, env in enumerate(envs)])
-    running, seen_obs, seen_actions = np.ones(episodes, dtype=bool), [], []
+    running, seen_actions = np.ones(episodes, dtype=bool), []
     with torch.no_grad():
         while running.any():
             rows = np.flatnonzero(running)
@@ -69,14 +69,13 @@ def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) 
                 noise = np.stack([rngs[i].standard_normal(mean.shape[-1]) for i in rows])
                 actions = mean + agent.actor_logstd.exp()[0].numpy() * noise
                 env_actions = np.clip(actions, *agent.action_bounds) if agent.action_bounds is not None else actions
-            seen_obs.append(obs[rows].copy())
             seen_actions.append(actions)
             for j, i in enumerate(rows):
                 obs[i], _, terminated, truncated, _ = envs[i].step(env_actions[j])
                 running[i] = not (terminated or truncated)
     for env in envs:
         env.close()
-    return np.concatenate(seen_obs), np.concatenate(seen_actions)
+    return np.concatenate(seen_actions)
 
 
 def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rate: float) -> tuple[torch.Tensor, float]:
@@ -92,7 +91,9 @@ def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rat
     else:
         targets, log_std = torch.as_tensor(actions, dtype=torch.float32), agent.actor_logstd[0]
         constant = float(log_std.sum()) + 0.5 * math.log(2 * math.pi) * len(log_std)
-        nll = lambda: 0.5 * ((targets - agent.actor_mean(null[None])) / log_std.exp()).square().sum(-1).mean() + constant
+        nll = lambda: (
+            0.5 * ((targets - agent.actor_mean(null[None])) / log_std.exp()).square().sum(-1).mean() + constant
+        )
     for _ in range(fit_steps):
         optimizer.zero_grad()
         loss = nll()
@@ -111,7 +112,7 @@ def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
         raise ValueError("its null embedding replaces some observation dimensions only (--null-dims): "
                          "its unconditional branch depends on the state, which this fit does not model")  # fmt: skip
     agent, module, _ = scripts.load_agent(ckpt, path, given)
-    obs, actions = own_episodes(agent, ckpt, module.make_env(ckpt["env_id"]), args.episodes, args.episode_seed)
+    actions = own_episodes(agent, ckpt, module.make_env(ckpt["env_id"]), args.episodes, args.episode_seed)
     null, nll = fit_null(agent, ckpt["action_space"], actions, args.fit_steps, args.learning_rate)
     fit = {"method": BC_FIT, "episodes": args.episodes, "episode_seed": args.episode_seed, "actions": len(actions),
            "fit_steps": args.fit_steps, "learning_rate": args.learning_rate, "nll": nll,

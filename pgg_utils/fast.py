@@ -99,7 +99,9 @@ def evaluation_forward(network: nn.Module, x: np.ndarray) -> np.ndarray:
         return network(padded).numpy()[:rows]
 
 
-def guidance_coefficients(guidance, rows: int) -> tuple[np.ndarray, np.ndarray]:
-    """The float32 weights (1 - γ, γ) of the two branches, (rows, 1) each; `guidance` a number or one per row."""
-    guidance = np.broadcast_to(np.asarray(guidance, dtype=np.float64), (rows,))[:, None]
-    return (1.0 - guidance).astype(np.float32), guidance.astype(np.float32)
+def standard_gumbel(uniform: np.ndarray) -> np.ndarray:
+    """Standard Gumbel noise, in the dtype of `uniform` (samples in [0, 1); a 0 is raised to float32's
+    smallest normal number, so the logarithms stay finite): argmax(logits + noise) is an exact
+    categorical sample (the Gumbel-max trick), far cheaper than torch.distributions. Training's
+    rollouts and the sweep draw their uniforms from their own generators and sample through this."""
+    return -np.log(-np.log(np.maximum(uniform, np.finfo(np.float32).tiny)))

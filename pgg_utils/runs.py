@@ -265,6 +265,12 @@ def non_finite(state: dict) -> list[str]:
     ]
 
 
+def require_finite(ckpt: dict, source: str | Path = "checkpoint") -> None:
+    """ValueError unless every weight and statistic of `ckpt` is finite: a diverged run's agent acts NaN."""
+    if bad := non_finite(ckpt["model"]):
+        raise ValueError(f"{source} holds non-finite weights or statistics ({', '.join(bad[:3])}); not loaded")
+
+
 def read_checkpoint_file(path: Path) -> dict:
     """A checkpoint dict, pickle-free (weights_only). ValueError with one line for anything unreadable."""
     try:

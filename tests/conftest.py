@@ -78,3 +78,76 @@ def compiled_calls(monkeypatch) -> list:
 
     monkeypatch.setattr(torch, "compile", spy_compile)
     return calls
+
+
+def cleanrl_minibatch_loss(newlogprob, entropy, newvalue, batch: dict, mb_inds, args):
+    """PPO's loss and statistics on one minibatch, line for line as CleanRL's ppo.py and
+    ppo_continuous_action.py write them, from log-probabilities, entropies and values that the caller
+    computes with torch.distributions: the reference the training scripts' `minibatch_loss` is held to."""
+    logratio = newlogprob - batch["logprobs"][mb_inds]
+    ratio = logratio.exp()
+    with torch.no_grad():
+        old_approx_kl = (-logratio).mean()
+        approx_kl = ((ratio - 1) - logratio).mean()
+        clipfrac = ((ratio - 1.0).abs() > args.clip_coef).float().mean()
+    mb_advantages = batch["advantages"][mb_inds]
+    if args.norm_adv:
+        mb_advantages = (mb_advantages - mb_advantages.mean()) / (mb_advantages.std() + 1e-8)
+    pg_loss1 = -mb_advantages * ratio
+    pg_loss2 = -mb_advantages * torch.clamp(ratio, 1 - args.clip_coef, 1 + args.clip_coef)
+    pg_loss = torch.max(pg_loss1, pg_loss2).mean()
+    newvalue = newvalue.view(-1)
+    if args.clip_vloss:
+        v_loss_unclipped = (newvalue - batch["returns"][mb_inds]) ** 2
+        v_clipped = batch["values"][mb_inds] + torch.clamp(
+            newvalue - batch["values"][mb_inds], -args.clip_coef, args.clip_coef
+        )
+        v_loss_clipped = (v_clipped - batch["returns"][mb_inds]) ** 2
+        v_loss_max = torch.max(v_loss_unclipped, v_loss_clipped)
+        v_loss = 0.5 * v_loss_max.mean()
+    else:
+        v_loss = 0.5 * ((newvalue - batch["returns"][mb_inds]) ** 2).mean()
+    entropy_loss = entropy.mean()
+    loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+    return loss, {
+        "losses/value_loss": v_loss,
+        "losses/policy_loss": pg_loss,
+        "losses/entropy": entropy_loss,
+        "losses/old_approx_kl": old_approx_kl,
+        "losses/approx_kl": approx_kl,
+        "losses/clipfrac": clipfrac,
+    }
+
+
+def assert_minibatch_loss_is_cleanrls(module, agent, batch: dict, mb_inds, args, reference_distribution) -> None:
+    """`module.minibatch_loss` without guidance against cleanrl_minibatch_loss, whose log-probabilities
+    and entropies come from `reference_distribution(agent, obs)` (a torch.distributions object, CleanRL's
+    get_action_and_value): the loss, its statistics and its gradient, to float rounding. The data must
+    reach both sides of every clip: some ratios and some values outside the clip range, some inside."""
+    results = []
+    for side in ("script", "cleanrl"):
+        agent.zero_grad()
+        if side == "script":
+            loss, stats = module.minibatch_loss(agent, batch, mb_inds, None, None, args)
+        else:
+            obs, actions = batch["obs"][mb_inds], batch["actions"][mb_inds]
+            distribution = reference_distribution(agent, obs)
+            newlogprob, entropy = distribution.log_prob(actions), distribution.entropy()
+            if newlogprob.dim() == 2:  # a Normal's, per action dimension
+                newlogprob, entropy = newlogprob.sum(1), entropy.sum(1)
+            loss, stats = cleanrl_minibatch_loss(newlogprob, entropy, agent.critic(obs), batch, mb_inds, args)
+        loss.backward()
+        grads = {name: p.grad.clone() for name, p in agent.named_parameters() if p.grad is not None}
+        results.append((loss.detach(), stats, grads))
+    (loss, stats, grads), (expected_loss, expected_stats, expected_grads) = results
+    assert 0.1 < expected_stats["losses/clipfrac"] < 0.9  # the ratio clip binds on some rows, not all
+    with torch.no_grad():
+        value_moved = (agent.get_value(batch["obs"][mb_inds]) - batch["values"][mb_inds]).abs()
+    assert 0.1 < (value_moved > args.clip_coef).float().mean() < 0.9  # so does the value clip
+    torch.testing.assert_close(loss, expected_loss, rtol=1e-5, atol=1e-6)
+    for key, value in expected_stats.items():
+        torch.testing.assert_close(stats[key], value, rtol=1e-5, atol=1e-6, msg=key)
+    assert grads.keys() == expected_grads.keys() and "null_obs" not in grads  # PPO: the null embedding idle
+    for name, grad in expected_grads.items():
+        assert grad.abs().max() > 0, name
+        torch.testing.assert_close(grads[name], grad, rtol=1e-4, atol=1e-6, msg=name)

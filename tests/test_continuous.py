@@ -7,7 +7,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, small_args, train
+from conftest import ROOT, assert_minibatch_loss_is_cleanrls, small_args, train
+from torch.distributions import Normal
 
 import ppo_pgg_continuous as pgg
 from pgg_utils import runs
@@ -277,3 +278,28 @@ def test_paper_task_steps_through_env_factory(env_id):
     # First observations, one per step and sub-env, and each episode's last one.
     episode_ends = int(buf.dones[1:].sum() + next_done.sum())
     assert float(agent.obs_norm.count) == pytest.approx(1e-4 + 2 + 600 + episode_ends)
+
+
+@pytest.mark.parametrize("clip_vloss", [True, False])
+@pytest.mark.parametrize("norm_adv", [True, False])
+def test_the_ppo_objective_is_cleanrls_with_torch_distributions(clip_vloss, norm_adv):
+    """minibatch_loss without guidance is CleanRL's ppo_continuous_action.py loss on a Normal, its
+    gradient included, on random data whose ratios and values fall on both sides of the clip range."""
+    torch.manual_seed(0)
+    agent, rows = pgg.Agent(5, 2), 256
+    with torch.no_grad():
+        agent.actor_logstd.copy_(torch.tensor([[-0.5, 0.3]]))
+
+    def cleanrl(agent, obs):
+        action_mean = agent.actor_mean(obs)
+        return Normal(action_mean, torch.exp(agent.actor_logstd.expand_as(action_mean)))
+
+    obs = torch.randn(rows, 5)
+    with torch.no_grad():
+        actions = cleanrl(agent, obs).sample()
+        acted = cleanrl(agent, obs).log_prob(actions).sum(1)
+        values = agent.get_value(obs) + 0.3 * torch.randn(rows)
+    batch = {"obs": obs, "actions": actions, "logprobs": acted + 0.3 * torch.randn(rows), "values": values,
+             "advantages": torch.randn(rows) * 2 + 0.5, "returns": values + torch.randn(rows)}  # fmt: skip
+    args = pgg.Args(clip_vloss=clip_vloss, norm_adv=norm_adv, ent_coef=0.01)  # the entropy term too
+    assert_minibatch_loss_is_cleanrls(pgg, agent, batch, torch.randperm(rows)[:128], args, cleanrl)

@@ -4,8 +4,9 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import small_args, train
+from conftest import assert_minibatch_loss_is_cleanrls, small_args, train
 from torch import nn
+from torch.distributions import Categorical
 
 import ppo_pgg_discrete as pgg
 from pgg_utils import runs
@@ -256,3 +257,21 @@ def test_short_cartpole_run_learns(tmp_path):
     agent, _ = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 50_000))
     # A random policy scores about 22. A broken GAE or autoreset stays far below this.
     assert evaluate(agent, 1.1) > 150
+
+
+@pytest.mark.parametrize("clip_vloss", [True, False])
+@pytest.mark.parametrize("norm_adv", [True, False])
+def test_the_ppo_objective_is_cleanrls_with_torch_distributions(clip_vloss, norm_adv):
+    """minibatch_loss without guidance is CleanRL's ppo.py loss on a Categorical, its gradient included,
+    on random data whose ratios and values fall on both sides of the clip range."""
+    torch.manual_seed(0)
+    agent, rows = pgg.Agent(4, 3), 256
+    obs, actions = torch.randn(rows, 4), torch.randint(0, 3, (rows,))
+    with torch.no_grad():
+        acted = Categorical(logits=agent.actor(obs)).log_prob(actions)
+        values = agent.get_value(obs) + 0.3 * torch.randn(rows)
+    batch = {"obs": obs, "actions": actions, "logprobs": acted + 0.3 * torch.randn(rows), "values": values,
+             "advantages": torch.randn(rows) * 2 + 0.5, "returns": values + torch.randn(rows)}  # fmt: skip
+    args = pgg.Args(clip_vloss=clip_vloss, norm_adv=norm_adv)
+    cleanrl = lambda agent, obs: Categorical(logits=agent.actor(obs))
+    assert_minibatch_loss_is_cleanrls(pgg, agent, batch, torch.randperm(rows)[:128], args, cleanrl)

@@ -1,8 +1,13 @@
 """A researcher's first changes must work, or stop with one line: a γ_train schedule, an adaptive
 γ_train, a bigger actor, a new argument, a goal-conditioned null embedding, acting with a loaded agent."""
 
+import ast
 import dataclasses
+import io
+import re
 import sys
+import tokenize
+from collections import defaultdict
 from dataclasses import replace
 from pathlib import Path
 
@@ -317,6 +322,184 @@ def test_a_checkpoint_with_clip_actions_infinite_bounds_acts_within_the_tasks(tm
     assert np.abs(agent.act(np.zeros(ckpt["obs_dim"]), guidance=50.0, noise=np.full((1, 17), 9.0))).max() == 0.4
 
 
+# --- the `# PGG` marks ---------------------------------------------------------------------------
+
+# Names and strings that only PGG's lines use: the null branch, the guidance, conditioning dropout and
+# its kept rows, the γ schedule, and the "pgg/" statistics.
+PGG_CONCEPT = re.compile(r"null|guid|uncond|drop|kept|schedule|pgg", re.IGNORECASE)
+
+
+def pgg_lines(source: str) -> set[int]:
+    """The code lines of a training script that PGG adds to PPO or changes, by rule: a line whose code
+    (names and strings; not comments, not docstrings) names a PGG concept; every line of a function
+    whose name does (decorators included); every line of a statement whose first line is PGG (a dict
+    of PGG statistics, closing bracket included); and the header of a block whose body is all PGG (a
+    `with torch.no_grad():` around the null branch). What it cannot see: a change to PPO made in a line
+    that names no PGG concept (a flipped clip: tests/test_discrete.py and test_continuous.py hold the loss
+    to CleanRL's), a PGG line under a name outside PGG_CONCEPT, and docstrings, which are exempt."""
+    tree = ast.parse(source)
+    docstrings = {
+        line
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant) and isinstance(node.value.value, str)
+        for line in range(node.lineno, node.end_lineno + 1)
+    }
+    code = defaultdict(str)  # code line -> its names and strings
+    layout = (tokenize.COMMENT, tokenize.NL, tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT, tokenize.ENDMARKER)
+    for token in tokenize.generate_tokens(io.StringIO(source).readline):
+        if token.type not in layout and token.start[0] not in docstrings:
+            named = token.type in (tokenize.NAME, tokenize.STRING)
+            code[token.start[0]] += " " + token.string.replace("pgg_utils", "") if named else ""
+    lines = {line for line, text in code.items() if PGG_CONCEPT.search(text)}
+
+    def code_lines(first: int, last: int) -> set[int]:
+        return {line for line in range(first, last + 1) if line in code}
+
+    statements = sorted((node for node in ast.walk(tree) if isinstance(node, ast.stmt)), key=lambda n: -n.lineno)
+    for node in statements:  # innermost first, so a block's body is settled before its header
+        first = min([node.lineno, *(d.lineno for d in getattr(node, "decorator_list", []))])
+        body = getattr(node, "body", None)
+        if (
+            isinstance(node, (ast.FunctionDef, ast.ClassDef))
+            and PGG_CONCEPT.search(node.name)
+            or body is None
+            and first in lines
+        ):
+            lines |= code_lines(first, node.end_lineno)
+        elif body and not isinstance(node, ast.ClassDef):
+            block = code_lines(body[0].lineno, node.end_lineno)
+            if block and block <= lines:
+                lines |= code_lines(first, body[0].lineno - 1)
+    return lines
+
+
+def marked_lines(source: str) -> set[int]:
+    return {
+        token.start[0]
+        for token in tokenize.generate_tokens(io.StringIO(source).readline)
+        if token.type == tokenize.COMMENT and re.match(r"# PGG\b", token.string)
+    }
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_pgg_marks_exactly_the_lines_pgg_adds_to_ppo(kind):
+    """`# PGG` marks every line of a training script that PGG adds to or changes in PPO, and nothing else
+    (pgg_lines is the rule), so that a reader, or a fork, sees PGG's algorithm at a glance."""
+    path = Path(SCRIPTS[kind].__file__)
+    source = path.read_text()
+    text = source.splitlines()
+    required, marked = pgg_lines(source), marked_lines(source)
+    unmarked = [f"{path.name}:{line}: {text[line - 1].strip()}" for line in sorted(required - marked)]
+    false_marks = [f"{path.name}:{line}: {text[line - 1].strip()}" for line in sorted(marked - required)]
+    assert not unmarked and not false_marks, "\n".join(
+        ["PGG lines without `# PGG`:", *unmarked, "`# PGG` on lines of PPO's own:", *false_marks]
+    )
+
+
+# --- one guided mix, one Gumbel sampler ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_rollouts_and_act_mix_the_two_branches_through_guide_alone(kind, monkeypatch):
+    """`guide` is the one function that mixes (1-γ)·null + γ·cond, for the rollouts and for `act` (the
+    sweep's); one guidance per row mixes each row exactly as that row's own number does."""
+    module, real_guide = SCRIPTS[kind], SCRIPTS[kind].guide
+    torch.manual_seed(0)
+    agent = module.Agent(4, 3)
+    mixed = []
+    monkeypatch.setattr(module, "guide", lambda cond, *rest: mixed.append(type(cond)) or real_guide(cond, *rest))
+    rng = np.random.default_rng(0)
+    obs, noise = rng.normal(size=(5, 4)).astype(np.float32), rng.normal(size=(5, 3)).astype(np.float32)
+    module.RolloutPolicy(agent, 1.3).act(obs, noise)
+    agent.act(obs, np.linspace(0.0, 3.0, 5), deterministic=True)
+    assert mixed == [np.ndarray, np.ndarray]
+    cond, null, per_row = (
+        rng.normal(size=(5, 3)).astype(np.float32),
+        rng.normal(size=3).astype(np.float32),
+        rng.random(5) * 3,
+    )
+    rows = real_guide(cond, null, per_row)
+    assert rows.dtype == np.float32
+    for i, guidance in enumerate(per_row):
+        assert np.array_equal(rows[i], real_guide(cond[i : i + 1], null, float(guidance))[0])
+
+
+def test_training_and_the_sweep_sample_gumbel_noise_through_one_function():
+    torch.manual_seed(3)
+    noise = ppo_pgg_discrete.gumbel_noise(6, 4)
+    torch.manual_seed(3)
+    assert noise.dtype == np.float32 and np.array_equal(noise, fast.standard_gumbel(torch.rand(6, 4).numpy()))
+    uniform = np.random.default_rng([10_000 + 2, 1]).uniform(np.finfo(np.float32).tiny, 1.0, size=(50, 4))
+    expected = fast.standard_gumbel(uniform).astype(np.float32)
+    assert np.array_equal(sweep.episode_noise("discrete", 10_000, 2, 50, 4), expected)
+    assert np.isfinite(fast.standard_gumbel(np.zeros(3, np.float32))).all()  # a uniform draw of 0 stays finite
+
+
+# --- act and load_checkpoint refuse what training refuses ----------------------------------------
+
+
+def fresh_checkpoint(kind: str) -> dict:
+    """The checkpoint dict of an untrained agent with 4 observation dimensions and 3 actions."""
+    torch.manual_seed(0)
+    if kind == "discrete":
+        shapes = {"obs_dim": 4, "n_actions": 3}
+    else:
+        shapes = {"obs_dim": 4, "action_dim": 3, "action_low": [-1.0] * 3, "action_high": [1.0] * 3}
+    args = {"obs_clip": 10.0} if kind == "continuous" else {}
+    model = SCRIPTS[kind].make_agent(args, shapes).state_dict()
+    return {
+        "format_version": runs.CHECKPOINT_FORMAT_VERSION,
+        "action_space": kind,
+        "args": args,
+        "model": model,
+        **shapes,
+    }
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+@pytest.mark.parametrize("guidance", [float("nan"), -5.0, 1e6, float("inf"), -0.001, [1.0, float("nan")], [2.0, 1001]])
+def test_act_refuses_a_guidance_that_training_and_the_sweep_refuse(kind, guidance):
+    agent = SCRIPTS[kind].agent_from_checkpoint(fresh_checkpoint(kind))
+    worst = np.asarray(guidance, dtype=np.float64)
+    worst = worst.min() if np.isnan(worst).any() or worst.min() < 0 else worst.max()
+    with pytest.raises(ValueError) as refused:
+        agent.act(np.zeros((2, 4)), guidance)
+    assert str(refused.value) == f"guidance must be a number in [0, 1000], got {float(worst)!r}"
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_act_refuses_a_non_finite_observation_and_guidance_of_another_length(kind):
+    agent = SCRIPTS[kind].agent_from_checkpoint(fresh_checkpoint(kind))
+    for bad in (np.nan, np.inf, -np.inf):
+        for obs in (np.array([0.0, bad, 0.0, 0.0]), np.array([[0.0] * 4, [0.0, 0.0, 0.0, bad]])):
+            with pytest.raises(ValueError, match=r"^the observation holds a NaN or an infinity$"):
+                agent.act(obs, 1.0)
+    with pytest.raises(
+        ValueError, match=r"^guidance must be a number or one per observation \(2\), got an array of shape \(3,\)$"
+    ):
+        agent.act(np.zeros((2, 4)), [1.0, 1.0, 1.0])
+    for guidance in (0.0, 1000.0, [0.0, 1000.0]):  # the rule's bounds are inside it
+        assert np.isfinite(np.asarray(agent.act(np.zeros((2, 4)), guidance), dtype=np.float64)).all()
+    assert np.asarray(agent.act(np.zeros(4), np.array([1.2]), deterministic=True)).shape == (
+        () if kind == "discrete" else (3,)
+    )
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_load_checkpoint_refuses_non_finite_weights(kind, tmp_path):
+    ckpt = fresh_checkpoint(kind)
+    torch.save(ckpt, tmp_path / "finite.pt")
+    SCRIPTS[kind].load_checkpoint(tmp_path / "finite.pt")
+    ckpt["model"]["critic.0.weight"][0, 0] = float("nan")
+    torch.save(ckpt, tmp_path / "diverged.pt")
+    with pytest.raises(ValueError) as refused:
+        SCRIPTS[kind].load_checkpoint(tmp_path / "diverged.pt")
+    assert (
+        str(refused.value)
+        == f"{tmp_path / 'diverged.pt'} holds non-finite weights or statistics (critic.0.weight); not loaded"
+    )
+
+
 # --- a fork: a copied script is evaluated by its own code and kept apart -----------------------------
 
 # A researcher's first-week fork of the continuous script: ReLU in place of Tanh, and a new argument
@@ -437,7 +620,7 @@ class Drift(gym.Env):
         return self.np_random.normal(size=3).astype(np.float32), reward, False, self.t >= 20, {}
 
 
-gym.register("ForkDrift-v0", entry_point=Drift)
+gym.register("ForkDrift-v0", entry_point=Drift, max_episode_steps=20)
 """
 
 
