@@ -26,7 +26,9 @@ for path in sys.argv[1:]:
     for n in (1, 2, 5, 10, 20, 40):
         actions = bc_null.own_episodes(agent, ckpt, module.make_env(ckpt["env_id"]), n, 30_000)
         fresh, _, _ = scripts.load_agent(ckpt, path)  # the fit starts from the checkpoint's own weights each time
-        null, nll = bc_null.fit_null(fresh, ckpt["action_space"], actions, 500, 0.05)
+        null, nll = bc_null.fit_null(
+            fresh, ckpt["action_space"], actions, bc_null.Args.fit_steps, bc_null.Args.learning_rate
+        )
         with torch.no_grad():
             if ckpt["action_space"] == "continuous":
                 sigma = fresh.actor_logstd.exp()[0].numpy()

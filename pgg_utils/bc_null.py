@@ -41,7 +41,7 @@ class Args:
     """episodes of the agent's own policy to fit to (a pilot: 20 episodes put the fitted unconditional mean within 0.02-0.18 σ of 40's, results/beyond/bc_null/pilot.txt)"""
     episode_seed: int = 30_000
     """episode k resets with seed episode_seed + k, its action noise from that seed too"""
-    fit_steps: int = 500
+    fit_steps: int = 2000
     """Adam steps on the null embedding (full batch)"""
     learning_rate: float = 0.05
     """Adam's learning rate"""
