@@ -6,6 +6,7 @@ pgg_utils.paper to extend."""
 
 from dataclasses import dataclass
 
+from pgg_utils.arguments import env_id_in_path
 from pgg_utils.paper import GOAL_DIMS, REFERENCE_ARGS, is_mujoco, paper_name, paper_rows
 
 # Arguments the variant id names; the configuration label lists the other training arguments that
@@ -91,10 +92,11 @@ def run_identity(args: dict, kind: str) -> RunIdentity:
 
 def run_name(args) -> str:
     """The default run directory name: `{env_id}__{exp_name}__g1.1__p0__s1`, with the schedule in place
-    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`) and `__goal` (or `__null4-5`) for partial null inputs."""
+    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`) and `__goal` (or `__null4-5`) for partial null inputs;
+    a namespaced id's ':' and '/' become '-' (arguments.env_id_in_path)."""
     values = vars(args)
     null = f"__{null_part(values)}" if null_part(values) else ""
-    return f"{args.env_id}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
+    return f"{env_id_in_path(args.env_id)}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
 
 
 def config_label(ckpt: dict) -> str:
