@@ -46,6 +46,9 @@ sorted), summary.csv (per env, variant, config, step and γ: mean over seeds of 
 return, and its 95% confidence interval, see `mean_ci95`), skipped.csv and evaluated_by.csv.
 """
 
+from pgg_utils import startup  # first: a Ctrl-C during the imports below is one line, status 130
+
+# isort: split
 import hashlib
 import inspect
 import io
@@ -539,19 +542,19 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
 def sweep(args: Args) -> Path:
     """Runs (or resumes) the sweep; returns the output directory."""
     check_args(args)
-    output = Path(args.output)
-    checkpoints = runs.find_checkpoints(args.paths, args.steps)
+    output, skipped = Path(args.output), []
+    checkpoints = runs.find_checkpoints(args.paths, args.steps, skipped)
     lock = claim_output(output)
     threads = torch.get_num_threads()
     try:
-        return sweep_locked(args, output, checkpoints)
+        return sweep_locked(args, output, checkpoints, skipped)
     finally:
         torch.set_num_threads(threads)  # run_job sets one thread per process
         lock.close()
 
 
-def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
-    skipped, stack = [], evaluation_stack()
+def sweep_locked(args: Args, output: Path, checkpoints: list[Path], skipped: list[str]) -> Path:
+    stack = evaluation_stack()
     cells, labels, evaluations = plan(args, checkpoints, output, stack, skipped)
     finished = {}  # (checkpoint, γ) -> its rows, as read back from its cell file or written to it
     try:
@@ -707,6 +710,7 @@ def main() -> None:
     args = tyro.cli(Args, description=__doc__)
     with one_line_errors():
         try:
+            startup.ctrl_c_handled()
             if args.video is not None:
                 check_args(args)
                 for path in record_videos(args):

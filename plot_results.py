@@ -52,6 +52,9 @@ Writes into --output (and prints each path):
                                 previous grid's figures), and no other file
 """
 
+from pgg_utils import startup  # first: a Ctrl-C during the imports below is one line, status 130
+
+# isort: split
 import csv
 import json
 import logging
@@ -742,6 +745,7 @@ def main() -> None:
     args = tyro.cli(Args, description=__doc__)
     with files.one_line_errors():
         try:
+            startup.ctrl_c_handled()
             written = generate(args)
         except KeyboardInterrupt:
             print("interrupted; the outputs written so far are complete files", file=sys.stderr)

@@ -21,6 +21,9 @@ management (run directories, checkpoints, resume, progress) is in `pgg_utils.run
     python ppo_pgg_continuous.py --env-id Reacher-v4 --guidance 1.1 --null-dims 4 5 8 9 10   # guidance on the goal
 """
 
+from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
+
+# isort: split
 import math
 from collections import defaultdict
 from dataclasses import asdict, dataclass

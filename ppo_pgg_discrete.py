@@ -20,6 +20,9 @@ progress) is in `pgg_utils.runs`.
     python ppo_pgg_discrete.py --env-id CartPole-v1 --guidance 1.1 --guidance-schedule adaptive --guidance-kl-target 0.01
 """
 
+from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
+
+# isort: split
 from collections import defaultdict
 from dataclasses import asdict, dataclass
 from pathlib import Path

@@ -18,6 +18,9 @@ SIGKILLed (Linux); SIGINT or SIGTERM also cancels submitit jobs. Preempted Slurm
 requeued and resume the same way. The sweep CSVs, tables and figures go to <results>.
 """
 
+from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
+
+# isort: split
 import contextlib
 import importlib.util
 import os
@@ -36,7 +39,7 @@ import tyro
 import eval_gamma_sweep
 import plot_results
 from pgg_utils import paper, processes, runs, scripts
-from pgg_utils.arguments import guidance_error
+from pgg_utils.arguments import env_id_in_path, guidance_error
 from pgg_utils.files import (
     InputError,
     LockedError,
@@ -180,7 +183,7 @@ class RunSpec:
 
     @property
     def name(self) -> str:
-        return f"{self.env_id}__{self.variant}__s{self.seed}"
+        return f"{env_id_in_path(self.env_id)}__{self.variant}__s{self.seed}"
 
     @property
     def run_dir(self) -> Path:

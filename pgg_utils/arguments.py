@@ -85,16 +85,24 @@ def acting_error(obs: np.ndarray, guidance: np.ndarray) -> str | None:
     return None
 
 
-def run_name_error(name: str | None) -> str | None:
+def run_name_error(name: str | None, what: str = "--run-name") -> str | None:
     """A run name is one path component: it cannot leave --output-dir or name it, and it is printable
-    with no space at either end (a blank or a newline would make a directory no one can type)."""
+    with no space at either end (a blank or a newline would make a directory no one can type). The
+    rule of the final name, whether given (--run-name) or built (`what` then says from which flags)."""
     if name is None:
         return None
     if not name.strip() or name in (".", "..") or "/" in name or "\\" in name or name != name.strip():
-        return f"--run-name must be one path component (no '/', not '.' or '..', no space at an end), got {name!r}"
+        return f"{what} must be one path component (no '/', not '.' or '..', no space at an end), got {name!r}"
     if not name.isprintable():
-        return f"--run-name must be printable (no newline or control character), got {name!r}"
+        return f"{what} must be printable (no newline or control character), got {name!r}"
     return None
+
+
+def env_id_in_path(env_id: str) -> str:
+    """An env id as a run name holds it: a namespaced or module-qualified id (`mymod:ns/Env-v0`) has
+    each ':' and '/' replaced by '-' (`mymod-ns-Env-v0`), so that the name stays one path component;
+    any other id is kept as it is."""
+    return env_id.replace(":", "-").replace("/", "-")
 
 
 # name -> (holds, requirement); NaN fails every comparison. Rules of arguments a script lacks are skipped.
@@ -108,13 +116,16 @@ ARGUMENT_RULES = {
     "vf_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
     "max_grad_norm": (lambda v: 0 < v < math.inf, "a finite number > 0"),
     "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
-    "cond_dropout": (lambda v: 0 <= v <= 1, "in [0, 1]"),
+    # At 1 no row keeps its state: every ratio compares pi(a|null) with the pi_hat(a|s) that acted, and the
+    # KL and clip fraction of the kept rows are of none.
+    "cond_dropout": (lambda v: 0 <= v < 1, "in [0, 1) (at 1 no row keeps its state)"),
     "guidance": (lambda v: guidance_error(v) is None, f"a number in [0, {MAX_GUIDANCE:g}]"),
     "guidance_schedule": (lambda v: v in SCHEDULES, ", ".join(SCHEDULES)),
     "guidance_final": (lambda v: v is None or 0 <= v <= MAX_GUIDANCE, f"a number in [0, {MAX_GUIDANCE:g}]"),
     "guidance_kl_target": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
     "guidance_bounds": (lambda v: 0 <= v[0] <= v[1] <= MAX_GUIDANCE, f"low <= high in [0, {MAX_GUIDANCE:g}]"),
     "null_dims": (lambda v: v is None or (len(v) > 0 and len(set(v)) == len(v)), "distinct observation indices"),
+    "seed": (lambda v: 0 <= v < 2**32, "in [0, 2**32 - 1] (numpy's seeds)"),
     "total_timesteps": (lambda v: v > 0, "positive"),
     "num_minibatches": (lambda v: v > 0, "positive"),
     "anneal_lr": (lambda v: isinstance(v, bool), "true or false"),

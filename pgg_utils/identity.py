@@ -8,7 +8,7 @@ argument in a script's `Args` keeps its runs apart with no table to extend. Plai
 import functools
 
 from pgg_utils import scripts
-from pgg_utils.arguments import RUN_ONLY_ARGS
+from pgg_utils.arguments import RUN_ONLY_ARGS, env_id_in_path
 
 # Arguments the variant id names; the configuration label lists the other training arguments.
 VARIANT_ARGS = frozenset({"guidance", "guidance_schedule", "guidance_final", "guidance_kl_target", "cond_dropout",
@@ -102,10 +102,11 @@ def format_arg(value) -> str:
 
 def run_name(args) -> str:
     """The default run directory name: `{env_id}__{exp_name}__g1.1__p0__s1`, with the schedule in place
-    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`) and `__goal` (or `__null4-5`) for partial null inputs."""
+    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`) and `__goal` (or `__null4-5`) for partial null inputs;
+    a namespaced id's ':' and '/' become '-' (arguments.env_id_in_path)."""
     values = vars(args)
     null = f"__{null_part(values)}" if null_part(values) else ""
-    return f"{args.env_id}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
+    return f"{env_id_in_path(args.env_id)}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
 
 
 def config_label(ckpt: dict) -> str:

@@ -12,6 +12,7 @@ import os
 import pickle
 import platform
 import random
+import re
 import shutil
 import subprocess
 import sys
@@ -27,16 +28,22 @@ import numpy as np
 import torch
 
 from pgg_utils import scripts
-from pgg_utils.arguments import ARGUMENT_RULES, run_name_error, training_arguments
+from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS, run_name_error, training_arguments
 from pgg_utils.files import InputError, LockedError, exit_status, lock_directory, write_atomic
 from pgg_utils.guidance import schedule_error
 from pgg_utils.identity import run_name
 from pgg_utils.progress import Progress
+from pgg_utils.startup import ctrl_c_handled
 
 # 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
 CHECKPOINT_FORMAT_VERSION = 2
 READABLE_FORMAT_VERSIONS = (1, 2)
 CHECKPOINT_GLOB = "step_*.pt"
+CHECKPOINT_NAME = re.compile(r"step_(\d+)\.pt")
+# What else the training scripts write into a run directory: TensorBoard's events, and RecordVideo's
+# videos under videos/ (a resumed run's in videos/from_step_<step>/).
+EVENTS_GLOB = "events.out.tfevents.*"
+VIDEO_GLOBS = ("rl-video-episode-*.mp4", "from_step_*/rl-video-episode-*.mp4")
 
 
 def argument_error(args, kind: str) -> str | None:
@@ -47,6 +54,10 @@ def argument_error(args, kind: str) -> str | None:
             return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
     if error := schedule_error(args) or run_name_error(args.run_name):
         return error
+    if args.run_name is None and (
+        error := run_name_error(run_name(args), "the run name built from --env-id and --exp-name")
+    ):
+        return f"{error}: choose another --exp-name, or pass --run-name"
     batch_size = args.num_envs * args.num_steps
     if args.num_minibatches <= 0 or batch_size % args.num_minibatches:
         return f"--num-minibatches must divide num_envs * num_steps = {batch_size}"
@@ -55,8 +66,6 @@ def argument_error(args, kind: str) -> str | None:
                 "use fewer --num-minibatches, more --num-steps, or --no-norm-adv")  # fmt: skip
     if args.checkpoint_interval < batch_size:
         return f"--checkpoint-interval must be at least one batch, num_envs * num_steps = {batch_size}"
-    if args.cond_dropout == 1 and args.target_kl is not None:
-        return "--target-kl never triggers with --cond-dropout 1 (the KL is measured on kept rows, and none is kept)"
     if args.resume and args.overwrite:
         return "--resume and --overwrite exclude each other"
     if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
@@ -92,6 +101,8 @@ def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=Non
     if kind == "discrete" and not (isinstance(observation_space, gym.spaces.Box) and len(observation_space.shape) == 1):
         return f"{env_id} has a {type(observation_space).__name__} observation space; ppo_pgg_discrete.py needs a vector (1-D Box)"
     obs_dim = gym.spaces.flatdim(observation_space)
+    if obs_dim == 0:
+        return f"{env_id} has an empty observation space (shape {observation_space.shape}): there is no state to condition on"
     if null_dims is not None and not all(0 <= d < obs_dim for d in null_dims):
         return f"--null-dims must be observation indices of {env_id}, 0..{obs_dim - 1}, got {list(null_dims)}"
     return error
@@ -138,25 +149,43 @@ def checkpoint_path(run_dir: Path, mark: int) -> Path:
     return Path(run_dir) / "checkpoints" / f"step_{mark:09d}.pt"
 
 
-def checkpoint_step(path: Path) -> int:
-    """The step mark in a checkpoint's file name."""
-    return int(Path(path).stem.split("_")[1])
+def checkpoint_step(path: Path) -> int | None:
+    """The step mark in a checkpoint's file name, `step_<digits>.pt`; None for any other name, such as
+    `step_abc.pt`: not a checkpoint the training scripts wrote, which the resume and the sweep skip with
+    one line (misnamed_checkpoint) and which nothing deletes."""
+    match = CHECKPOINT_NAME.fullmatch(Path(path).name)
+    return int(match[1]) if match else None
+
+
+def misnamed_checkpoint(path: Path) -> str:
+    return f"{path}: not a checkpoint's name (step_<digits>.pt); left as it is"
 
 
 def checkpoints_of(run_dir: Path) -> list[Path]:
-    """A run's checkpoints, in the order of their steps."""
-    return sorted((Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB), key=checkpoint_step)
+    """A run's checkpoints, in the order of their steps (misnamed ones left out: misnamed_checkpoints)."""
+    found = (Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB)
+    return sorted((path for path in found if checkpoint_step(path) is not None), key=checkpoint_step)
 
 
-def find_checkpoints(paths, steps=None) -> list[Path]:
+def misnamed_checkpoints(run_dir: Path) -> list[Path]:
+    return sorted(
+        path for path in (Path(run_dir) / "checkpoints").glob(CHECKPOINT_GLOB) if checkpoint_step(path) is None
+    )
+
+
+def find_checkpoints(paths, steps=None, skipped: list[str] | None = None) -> list[Path]:
     """The checkpoint files that `paths` name or hold (run directories, agents folders, files), once each,
-    at `steps` if given, sorted; InputError with one line where a path has none."""
+    at `steps` if given, sorted; InputError with one line where a path has none. A misnamed file in a
+    folder is left out, with its line appended to `skipped`; a file named on its own is taken whatever its name."""
     found = {}
     for raw in paths:
         path = Path(raw)
         if not path.exists():
             raise InputError(f"no such file or directory: {raw}")
         matches = [path] if path.is_file() else sorted(path.rglob(f"checkpoints/{CHECKPOINT_GLOB}"))
+        if skipped is not None:
+            skipped.extend(misnamed_checkpoint(m) for m in matches if m != path and checkpoint_step(m) is None)
+        matches = [m for m in matches if m == path or checkpoint_step(m) is not None]
         if not matches:
             raise InputError(f"no checkpoints (checkpoints/{CHECKPOINT_GLOB}) under {raw}")
         for match in matches:  # one entry per file, however many of the given paths reach it
@@ -451,6 +480,67 @@ class NonFiniteError(Exception):
     """Training produced a NaN or an infinity; the message is one line naming the iteration."""
 
 
+def project_files(run_dir: Path, checkpoints: bool) -> list[Path]:
+    """The files in a run directory that a fresh start replaces, all written by the training scripts:
+    TensorBoard's events and RecordVideo's videos, and with `checkpoints` (--overwrite) the checkpoints
+    and those set aside as unreadable. Anything else there, a user's notes or videos, is never deleted."""
+    run_dir = Path(run_dir)
+    found = [*run_dir.glob(EVENTS_GLOB), *(p for glob in VIDEO_GLOBS for p in (run_dir / "videos").glob(glob))]
+    if checkpoints:
+        for path in (run_dir / "checkpoints").glob("step_*.pt*"):
+            name = path.name.split(".pt", 1)
+            if checkpoint_step(name[0] + ".pt") is not None and re.fullmatch(r"(\.unreadable(\.\d+)?)?", name[1]):
+                found.append(path)
+    return sorted(p for p in found if p.is_file())
+
+
+def as_json(values: dict) -> dict:
+    """Arguments as args.json holds them (tuples as lists), so that the two records compare."""
+    return json.loads(json.dumps(values))
+
+
+def read_args_json(run_dir: Path) -> dict | None:
+    """The arguments a run directory's args.json records; None where it has none. ValueError (one line)
+    for a file that is not a JSON object."""
+    path = Path(run_dir) / "args.json"
+    if not path.exists():
+        return None
+    try:
+        recorded = json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path} is not a run's arguments ({type(e).__name__}: {e})") from None
+    if not isinstance(recorded, dict):
+        raise ValueError(f"{path} is not a run's arguments (not a JSON object)")  # noqa: TRY004 (this module's one-line errors)
+    return recorded
+
+
+def record_error(run_dir: Path, ckpt: dict | None = None) -> str | None:
+    """Why a run's two records disagree, its args.json and its last readable checkpoint (`ckpt`, read by
+    the caller; None: the directory's last readable one), or None. The training arguments both name
+    must be equal: an edited args.json is never believed over the checkpoints, nor used alone."""
+    try:
+        recorded = read_args_json(run_dir)
+    except ValueError as e:
+        return str(e)
+    if recorded is None:
+        return None
+    if ckpt is None:
+        for path in reversed(checkpoints_of(run_dir)):
+            try:
+                ckpt = read_checkpoint_file(path)
+                break
+            except ValueError:
+                continue
+    if ckpt is None:
+        return None
+    saved = as_json(ckpt.get("args", {}))
+    differing = [f"{name} {recorded[name]!r} (checkpoints: {saved[name]!r})" for name in sorted(recorded.keys() & saved.keys())
+                 if name not in RUN_ONLY_ARGS and recorded[name] != saved[name]]  # fmt: skip
+    if differing:
+        return f"{Path(run_dir) / 'args.json'} disagrees with the run's checkpoints: {', '.join(differing)}"
+    return None
+
+
 def differing_arguments(recorded: dict, wanted: dict, defaults: dict) -> list[str]:
     """`name recorded -> wanted` for each training argument in which a run's checkpoint differs from the
     arguments it is asked to continue with: the runs a training script refuses to continue."""
@@ -497,32 +587,57 @@ class Run:
         return run
 
     def apply_rules(self) -> None:
+        """Continues, refuses or starts the run; removes only files the training scripts wrote
+        (project_files), and those only where a fresh start replaces them: with --overwrite, or with
+        --resume where no checkpoint was reached (the same run, by its args.json, starts again)."""
         args = self.args
         latest, unreadable = self.last_readable_checkpoint() if not args.overwrite else (None, [])
+        if not args.overwrite and (error := record_error(self.dir, self.loaded if latest else None)):
+            raise RunDirError(f"{error}: restore it, or pass --overwrite to start over")
         if latest is not None:
             self.check_continuable(latest)
         elif unreadable and not args.resume:
             raise RunDirError(f"cannot read {unreadable[0][0]} ({unreadable[0][1]}): pass --resume to continue from the "
                               "last readable checkpoint (it is kept, set aside), or --overwrite to start over")  # fmt: skip
+        fresh = not (args.resume and latest is not None)
+        earlier = project_files(self.dir, checkpoints=args.overwrite) if fresh else []
+        if earlier and not args.overwrite:
+            self.check_restartable(earlier)
         # Every check has passed: only now is anything renamed or deleted.
+        self.notes += [misnamed_checkpoint(path) for path in misnamed_checkpoints(self.dir)]
         for path, why in unreadable:
             aside = unused_name(path.with_name(path.name + ".unreadable"))
             os.replace(path, aside)
             self.notes.append(f"set aside {aside.name}: {why}")
-        for stale in (self.dir / "checkpoints").glob("*.tmp"):  # a write that a kill cut short
-            stale.unlink()
-        if args.resume and latest is not None and checkpoint_path(self.dir, args.total_timesteps).exists():
+        for stale in (self.dir / "checkpoints").glob("step_*.pt.tmp"):  # a write that a kill cut short
+            if checkpoint_step(stale.with_suffix("")) is not None:
+                stale.unlink()
+        if not fresh and checkpoint_path(self.dir, args.total_timesteps).exists():
             self.finished = True  # nothing to train, and nothing of it to touch
             return
-        if args.resume and latest is not None:
+        if not fresh:
             self.resume_from = latest
-        else:  # a fresh start; unreadable checkpoints set aside stay, unless --overwrite
-            shutil.rmtree(self.dir / "videos", ignore_errors=True)
-            if args.overwrite:
-                shutil.rmtree(self.dir / "checkpoints", ignore_errors=True)
-            for stale in self.dir.glob("events.out.tfevents.*"):
-                stale.unlink()
+        for path in earlier:  # a fresh start; unreadable checkpoints set aside stay, unless --overwrite
+            path.unlink()
+        for folder in sorted({path.parent for path in earlier}, key=lambda f: -len(f.parts)):
+            if folder != self.dir and not any(folder.iterdir()):  # emptied of what the scripts wrote
+                folder.rmdir()
         write_atomic(self.dir / "args.json", json.dumps(asdict(args), indent=2))
+
+    def check_restartable(self, earlier: list[Path]) -> None:
+        """Raises RunDirError unless a fresh start without --overwrite may replace `earlier`, the events and
+        videos of a start that reached no checkpoint: only with --resume, and only that same run's."""
+        what = ", ".join(sorted({"TensorBoard events" if p.name.startswith("events.") else "videos" for p in earlier}))
+        if not self.args.resume:
+            raise RunDirError(f"{self.dir} holds {what} of an earlier start that reached no checkpoint: pass --resume "
+                              "to start that run again in their place, or --overwrite, or choose another --run-name")  # fmt: skip
+        recorded = read_args_json(self.dir)
+        if recorded is None:
+            raise RunDirError(f"{self.dir} holds {what} but no args.json to tell whose: pass --overwrite to replace "
+                              "them, or choose another --run-name")  # fmt: skip
+        if differing := differing_arguments(recorded, as_json(asdict(self.args)), as_json(self.defaults())):
+            raise RunDirError(f"{self.dir} holds {what} of a run with other arguments ({', '.join(differing)}): "
+                              "choose another --run-name, or pass --overwrite to replace them")  # fmt: skip
 
     def last_readable_checkpoint(self) -> tuple[Path | None, list[tuple[Path, str]]]:
         """(the last checkpoint that loads, [(each later one that does not, why)]). Reads, renames nothing.
@@ -751,12 +866,15 @@ def launch(args, kind: str, script: str, train) -> None:
         print(f"{run.dir} holds a finished run ({latest_checkpoint(run.dir).name}); nothing to train")
         return
     try:
+        ctrl_c_handled()
         train(args, run)
     except (KeyboardInterrupt, OSError, NonFiniteError, CheckpointError) as e:
         latest = latest_checkpoint(run.dir)
         if isinstance(e, KeyboardInterrupt):
             kept = (
-                f"checkpoints up to {latest.name} are kept: continue with --resume" if latest else "no checkpoint yet"
+                f"checkpoints up to {latest.name} are kept: continue with --resume"
+                if latest
+                else "no checkpoint yet: start it again with --resume"
             )
             print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
             sys.exit(130)

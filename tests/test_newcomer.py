@@ -263,3 +263,40 @@ def test_osmesa_without_its_library_names_the_package(tmp_path):
     done = run_script("ppo_pgg_continuous.py", "--env-id", "Hopper-v4", "--capture-video", "--output-dir",
                       str(tmp_path), env=env)  # fmt: skip
     assert "osmesa needs apt-get install libosmesa6" in one_line_error(done)
+
+
+# --- 8. a namespaced env id (issue 46) -------------------------------------------------------------------
+
+NAMESPACED_MODULE = """
+import gymnasium as gym
+import numpy as np
+
+
+class Line(gym.Env):
+    observation_space = gym.spaces.Box(-1.0, 1.0, (2,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        return np.zeros(2, np.float32), {}
+
+    def step(self, action):
+        return np.full(2, float(action) - 0.5, np.float32), float(action), False, False, {}
+
+
+gym.register("ns46/Line-v0", entry_point=Line, max_episode_steps=20)
+"""
+
+
+def test_reproduce_trains_and_sweeps_a_namespaced_id_in_one_directory_per_run(tmp_path, monkeypatch):
+    """`module:namespace/Env-v0` ids: the run name replaces ':' and '/' by '-', one path component."""
+    (tmp_path / "newcomer46.py").write_text(NAMESPACED_MODULE)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
+    assert reproduce.reproduce(tiny_grid(tmp_path, "results", envs=("newcomer46:ns46/Line-v0",))) == 0
+    (run_dir,) = (tmp_path / "runs").glob("newcomer46*")
+    assert run_dir.name == "newcomer46-ns46-Line-v0__ppo__s1" and runs.checkpoints_of(run_dir)
+    assert "| newcomer46:ns46/Line-v0 |" in (tmp_path / "results" / "table_discrete.md").read_text()

@@ -195,7 +195,8 @@ def test_rerun_with_other_arguments_is_refused_before_touching_the_run(tmp_path)
     assert {path: path.read_bytes() for path in before} == before
 
 
-@pytest.mark.parametrize("flag", [["--learning-rate", "nan"], ["--guidance", "1e39"], ["--checkpoint-interval", "100"]])
+@pytest.mark.parametrize("flag", [["--learning-rate", "nan"], ["--guidance", "1e39"], ["--checkpoint-interval", "100"],
+                                  ["--seed", "-1"], ["--seed", "18446744073709551617"]])  # fmt: skip
 def test_invalid_arguments_are_refused_before_touching_the_disk(flag, tmp_path):
     line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path / "runs"), *flag))
     assert flag[0] in line
@@ -460,11 +461,13 @@ def test_a_task_without_a_vector_observation_is_refused_before_touching_the_disk
     assert f"{space} observation space" in line and not (tmp_path / "runs").exists()
 
 
-def test_target_kl_with_every_row_dropped_is_refused(tmp_path):
-    line = one_line_error(
-        run_training("discrete", "--cond-dropout", "1", "--target-kl", "0.01", "--output-dir", str(tmp_path))
-    )
-    assert "--target-kl never triggers with --cond-dropout 1" in line
+def test_dropping_every_row_is_refused(tmp_path):
+    """At --cond-dropout 1 no row keeps its state: the KL and clip fraction of the kept rows are of none
+    (logged as 0.0, so --target-kl could never fire), and the policy never sees a state."""
+    line = one_line_error(run_training("discrete", "--cond-dropout", "1", "--total-timesteps", "512",
+                                       "--output-dir", str(tmp_path / "runs")))  # fmt: skip
+    assert line == "error: --cond-dropout must be in [0, 1) (at 1 no row keeps its state), got 1.0"
+    assert not (tmp_path / "runs").exists()
 
 
 def test_an_eta_reads_in_minutes_and_seconds():
@@ -554,3 +557,115 @@ def test_compile_flag_trains_through_the_compiled_loss(kind, tmp_path, compiled_
 def test_bad_input_exits_with_one_line(kind, flags, message):
     no_compiler = {key: value for key, value in os.environ.items() if key != "CXX"} | {"PATH": ""}
     assert message in one_line_error(run_training(kind, *flags, env=no_compiler))
+
+
+# --- what a newcomer broke, round three (issue 46) -----------------------------------------------
+
+
+def test_a_fresh_start_never_deletes_a_file_the_scripts_did_not_write(tmp_path):
+    """An earlier start's events and videos are not replaced without --overwrite (or --resume of the same
+    run); --overwrite removes only what the scripts wrote, never a user's files beside them."""
+    args = small_args("discrete", tmp_path, total_timesteps=512, checkpoint_interval=512, run_name="r")
+    run_dir = tmp_path / "r"
+    (run_dir / "videos").mkdir(parents=True)
+    (run_dir / "videos" / "holiday.mp4").write_bytes(b"mine")
+    (run_dir / "events.out.tfevents.1.old").write_bytes(b"an earlier start's curve")
+    with pytest.raises(
+        runs.RunDirError, match="holds TensorBoard events of an earlier start that reached no checkpoint"
+    ):
+        prepare(ppo_pgg_discrete, args)
+    assert sorted(p.name for p in run_dir.rglob("*") if p.is_file()) == [".lock", "events.out.tfevents.1.old",
+                                                                         "holiday.mp4"]  # fmt: skip
+    train(ppo_pgg_discrete, replace(args, overwrite=True))
+    (run_dir / "checkpoints" / "my_notes.txt").write_text("notes")
+    (run_dir / "checkpoints" / "step_best.pt").write_bytes(runs.checkpoint_path(run_dir, 512).read_bytes())
+    train(ppo_pgg_discrete, replace(args, overwrite=True))
+    assert (run_dir / "videos" / "holiday.mp4").read_bytes() == b"mine"
+    assert (run_dir / "checkpoints" / "my_notes.txt").read_text() == "notes" and (
+        run_dir / "checkpoints" / "step_best.pt"
+    ).exists()
+    assert (
+        not (run_dir / "events.out.tfevents.1.old").exists() and len(list(run_dir.glob("events.out.tfevents.*"))) == 1
+    )
+
+
+def test_resume_restarts_a_run_that_reached_no_checkpoint_only_if_it_is_the_same_run(tmp_path):
+    """As the launcher does after a kill before the first checkpoint: --resume replaces the events of the
+    same run's start (by its args.json), and refuses those of another."""
+    args = small_args("discrete", tmp_path, total_timesteps=512, checkpoint_interval=512, run_name="r")
+    run_dir = train(ppo_pgg_discrete, args)
+    runs.checkpoint_path(run_dir, 512).unlink()
+    with pytest.raises(runs.RunDirError, match=r"of a run with other arguments \(learning_rate"):
+        prepare(ppo_pgg_discrete, replace(args, resume=True, learning_rate=0.002))
+    train(ppo_pgg_discrete, replace(args, resume=True))
+    assert runs.checkpoint_path(run_dir, 512).exists() and len(list(run_dir.glob("events.out.tfevents.*"))) == 1
+
+
+def test_an_args_json_that_disagrees_with_the_checkpoints_is_refused(tmp_path):
+    args = small_args("discrete", tmp_path, total_timesteps=512, checkpoint_interval=512)
+    run_dir = train(ppo_pgg_discrete, args)
+    edited = (run_dir / "args.json").read_text().replace("CartPole-v1", "Acrobot-v1")
+    (run_dir / "args.json").write_text(edited)
+    expected = (f"{run_dir / 'args.json'} disagrees with the run's checkpoints: env_id 'Acrobot-v1' (checkpoints: "
+                "'CartPole-v1')")  # fmt: skip
+    assert runs.record_error(run_dir) == expected
+    with pytest.raises(runs.RunDirError, match="disagrees with the run's checkpoints"):
+        prepare(ppo_pgg_discrete, replace(args, resume=True))
+    assert (run_dir / "args.json").read_text() == edited
+
+
+def test_a_name_built_from_exp_name_is_one_path_component(tmp_path):
+    output = tmp_path / "a" / "b" / "runs"
+    line = one_line_error(run_training("discrete", "--exp-name", "x/../../../esc_outside", "--output-dir", str(output)))
+    assert "the run name built from --env-id and --exp-name must be one path component" in line
+    assert not list(tmp_path.iterdir())
+
+
+def test_a_namespaced_id_makes_one_path_component_and_other_names_are_unchanged():
+    assert identity.run_name(ppo_pgg_discrete.Args(env_id="mymod:ns/Env-v0")) == "mymod-ns-Env-v0__ppo_pgg__g1__p0__s1"
+    assert identity.run_name(ppo_pgg_discrete.Args(guidance=1.1, seed=3)) == "CartPole-v1__ppo_pgg__g1.1__p0__s3"
+
+
+def test_a_misnamed_checkpoint_is_skipped_with_a_line_by_the_resume_and_the_sweep(tmp_path, capsys):
+    args = small_args("discrete", tmp_path, total_timesteps=1024, checkpoint_interval=512)
+    run_dir = train(ppo_pgg_discrete, args)
+    runs.checkpoint_path(run_dir, 1024).unlink()
+    misnamed = run_dir / "checkpoints" / "step_abc.pt"
+    misnamed.touch()
+    code, error = launch(ppo_pgg_discrete, replace(args, resume=True), capsys)
+    assert code == 0 and f"note: {misnamed}: not a checkpoint's name (step_<digits>.pt); left as it is" in error
+    assert misnamed.exists() and runs.checkpoint_path(run_dir, 1024).exists()
+    skipped = []
+    assert runs.find_checkpoints([run_dir], skipped=skipped) == runs.checkpoints_of(run_dir)
+    assert skipped == [f"{misnamed}: not a checkpoint's name (step_<digits>.pt); left as it is"]
+
+
+class EmptyObservation(gym.Env):
+    observation_space = gym.spaces.Box(-1.0, 1.0, (0,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+
+
+def test_an_empty_observation_space_is_refused_before_training():
+    gym.register("EmptyObservation-v0", entry_point=EmptyObservation)
+    try:
+        error = runs.env_error("EmptyObservation-v0", "discrete")
+    finally:
+        del gym.registry["EmptyObservation-v0"]
+    assert error == "EmptyObservation-v0 has an empty observation space (shape (0,)): there is no state to condition on"
+
+
+@pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py"])
+def test_ctrl_c_while_importing_is_one_line_and_status_130(script, tmp_path):
+    """SIGINT while torch is being imported (its library is mapped, the import not finished)."""
+    proc = subprocess.Popen([sys.executable, str(ROOT / script), "--output-dir", str(tmp_path / "out")],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)  # fmt: skip
+    maps, deadline = Path(f"/proc/{proc.pid}/maps"), time.time() + 60
+    while "libtorch" not in maps.read_text() and time.time() < deadline:
+        time.sleep(0.005)
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and stderr.strip() == "interrupted while starting", stderr
+    assert not (tmp_path / "out").exists()
