@@ -31,9 +31,10 @@ finished (checkpoint, γ) cell, written atomically and named by the bytes of the
 evaluated, the γ, the settings and the evaluation stack (the mujoco, gymnasium, numpy and torch
 versions, recorded in every row). A rerun reuses a cell only if it is whole and every row's checksum
 holds, so an interrupted sweep (Ctrl-C: exit status 130) loses only the cells in flight, and a
-damaged cell is evaluated again. Then episodes.csv (every episode of the requested cells, sorted) and
+damaged cell is evaluated again. Then episodes.csv (every episode of the requested cells, sorted),
 summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean return, and
-its 95% confidence interval, see `mean_ci95`).
+its 95% confidence interval, see `mean_ci95`), skipped.csv, and written.csv: each of those three with
+its number of rows and sha256, by which plot_results.py refuses an episodes.csv that is not whole.
 """
 
 import hashlib
@@ -69,6 +70,7 @@ from pgg_utils.files import (
     lock_directory,
     one_line_errors,
     write_csv_atomic,
+    write_record,
 )
 from pgg_utils.identity import config_label, run_identity
 from pgg_utils.paper import PAPER_GAMMAS
@@ -515,6 +517,9 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path]) -> Path:
         write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
         write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
         write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
+        # What the sweep wrote, by rows and digest: the tables refuse an episodes.csv that is not (plot_results).
+        write_record(output, {"episodes.csv": len(rows), "summary.csv": len(summary), "skipped.csv": len(skipped)},
+                     "eval_gamma_sweep.py")  # fmt: skip
     except KeyboardInterrupt:
         raise SweepInterrupted(
             f"{len(finished)} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "

@@ -8,6 +8,7 @@ import io
 import itertools
 import math
 import zlib
+from pathlib import Path
 
 import matplotlib.colors
 import matplotlib.figure
@@ -393,14 +394,22 @@ def gamma_response(summary, envs, step):
     return fig
 
 
-def learning_curves(curves: dict, bins: int = 50, min_points: int = 5) -> matplotlib.figure.Figure:
+def learning_curves(curves: dict, left_out=(), bins: int = 50, min_points: int = 5) -> matplotlib.figure.Figure:
     """Episodic training return against steps, one panel per env, from `curves` ({(env, variant,
     configuration label): [(steps, returns) per seed]}, plot_results.training_curves): per variant and
     configuration the mean over seeds of each seed's mean in each of `bins` step bins, with the t 95% CI.
-    Draws whatever points exist and says so in the panel when they are too few for a curve."""
-    envs = sorted({env for env, _, _ in curves})
+    Draws whatever points exist and says so in the panel when they are too few for a curve. `left_out`:
+    (env, run directory, why) of each run not drawn, named in its env's panel."""
+    envs = sorted({env for env, _, _ in curves} | {env for env, _, _ in left_out})
     fig, axes = panels(len(envs))
     for ax, env in zip(axes, envs):
+        skipped = [f"{Path(run_dir).name}: {why}" for e, run_dir, why in left_out if e == env]
+        if skipped:
+            ax.text(0.02, 0.98, "left out, not whole:\n" + "\n".join(skipped), transform=ax.transAxes, fontsize=5,
+                    va="top", color="firebrick", wrap=True)  # fmt: skip
+        if not any(e == env for e, _, _ in curves):
+            style_axis(ax, env, "training steps", "episodic return", steps_on_x=True)
+            continue
         drawn, notes = [], []
         of_env = [((v, label), seeds) for (e, v, label), seeds in curves.items() if e == env]
         for (variant, label), seeds in sorted(of_env, key=lambda kv: (variant_rank(kv[0][0]), kv[0])):
