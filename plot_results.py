@@ -50,6 +50,14 @@ Writes into --output (and prints each path):
   outputs.txt                   the files above that this run wrote. A rerun into the same folder
                                 removes those the previous run listed and it did not write again (a
                                 previous grid's figures), and no other file
+
+--output is locked while it is written (a second plot_results.py or reproduce.py into it is refused).
+Partial inputs are never tabled as whole: an episodes.csv that differs from its sweep's written.csv
+(rows and sha256) is refused; without one, so is a cell with fewer episodes than the file's other cells,
+and a cell with fewer seeds than the other cells of its configuration is named in a printed note and
+in the tables ("(4 of 5 seeds)"). --runs draws only whole runs: one whose events hold no episodic
+return or end before its total_timesteps or its last checkpoint is left out and named (a printed note,
+and in its panel).
 """
 
 import json

@@ -7,6 +7,7 @@ No torch; the matplotlib backend is the caller's (plot_results sets Agg)."""
 import io
 import itertools
 import math
+import pickle
 import zlib
 from pathlib import Path
 
@@ -68,6 +69,7 @@ def cell_index(summary: list[dict]) -> dict:
 def render(fig) -> dict[str, bytes]:
     """{"png": ..., "pdf": ...}: the figure rendered in memory (the PDF without a date, so that it
     regenerates bit for bit), and closed."""
+    separate_titles(fig)
     images = {}
     for image_format, metadata in (("png", None), ("pdf", {"CreationDate": None})):
         image = io.BytesIO()
@@ -75,6 +77,36 @@ def render(fig) -> dict[str, bytes]:
         images[image_format] = image.getvalue()
     plt.close(fig)
     return images
+
+
+def separate_titles(fig) -> None:
+    """Breaks the titles of side-by-side panels that would overlap (a long task name with its notes)
+    onto two lines, before the parenthesis of their notes, else before their last comma. The overlap
+    is measured on a laid-out copy of the figure: a figure whose titles fit is not touched, and draws
+    exactly as before."""
+    for _ in range(3):  # a broken title can still be too wide: break it again
+        laid_out = pickle.loads(pickle.dumps(fig))
+        laid_out.draw_without_rendering()
+        renderer = laid_out.canvas.get_renderer()
+        boxes = [ax.title.get_window_extent(renderer) if ax.get_visible() and ax.get_title() else None
+                 for ax in laid_out.axes]  # fmt: skip
+        plt.close(laid_out)
+        crowded = {i for i, a in enumerate(boxes) for j, b in enumerate(boxes) if i != j and a and b and a.overlaps(b)}
+        if not [i for i in sorted(crowded) if break_title(fig.axes[i].title)]:
+            return
+
+
+def break_title(title) -> bool:
+    """Breaks the widest line of a title once (separate_titles); False where it has no place to break."""
+    lines = title.get_text().split("\n")
+    widest = max(range(len(lines)), key=lambda i: len(lines[i]))
+    line = lines[widest]
+    at, skip = (line.index(" ("), 1) if " (" in line else (line.rfind(", "), 2)
+    if at <= 0:
+        return False
+    lines[widest : widest + 1] = [line[: at + (1 if skip == 2 else 0)], line[at + skip :]]
+    title.set_text("\n".join(lines))
+    return True
 
 
 def panels(n: int, cols: int | None = None):

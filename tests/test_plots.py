@@ -1023,3 +1023,25 @@ def test_runs_with_damaged_short_or_missing_events_are_left_out_and_named(sweep_
 
 def legend_labels_of_axes(fig) -> list[str]:
     return [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]
+
+
+def test_long_panel_titles_are_broken_rather_than_overlap(tmp_path):
+    """Side-by-side panels of long task names with their notes would overlap: their titles are broken
+    onto two lines before the notes; a figure whose titles fit draws as before."""
+    envs = ("InvertedDoublePendulum-v4", "HumanoidStandup-v4", "HalfCheetah-v4")
+    cells = {(env, "ppo", step, 1.0): [100.0, 101.0, 102.0] for env in envs for step in (100000, 200000)}
+    write_episodes(tmp_path / "a.csv", episode_rows(cells, config="mujoco=3.1.6", action_space="continuous"))
+    summary = summary_of(tmp_path / "a.csv")
+    fig = figures.figure_for_variant(summary, list(envs), "ppo")
+    figures.render(fig)  # what every figure goes through on its way to a file
+    assert fig.axes[0].get_title() == "InvertedDoublePendulum-v4\n(3 seeds, MuJoCo 3.1.6)"
+    fig = figures.figure_for_variant(summary, list(envs), "ppo")
+    figures.separate_titles(fig)
+    fig.draw_without_rendering()  # laid out as when it is saved
+    renderer = fig.canvas.get_renderer()
+    boxes = [ax.title.get_window_extent(renderer) for ax in fig.axes if ax.get_visible()]
+    assert not any(a.overlaps(b) for a, b in itertools.combinations(boxes, 2))
+    matplotlib.pyplot.close(fig)
+    short = figures.figure_for_variant(summary_of(tmp_path / "a.csv"), ["HalfCheetah-v4"], "ppo")
+    figures.render(short)
+    assert short.axes[0].get_title() == "HalfCheetah-v4 (3 seeds, MuJoCo 3.1.6)"
