@@ -43,7 +43,9 @@ a cell only if it is whole and every row's checksum holds, so an interrupted swe
 status 130) loses only the cells in flight, a damaged cell is evaluated again, and so is every cell
 after an edit to the script or the task. Then episodes.csv (every episode of the requested cells,
 sorted), summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean
-return, and its 95% confidence interval, see `mean_ci95`), skipped.csv and evaluated_by.csv.
+return, and its 95% confidence interval, see `mean_ci95`), skipped.csv, evaluated_by.csv, and
+written.csv: episodes.csv, summary.csv and skipped.csv with their numbers of rows and sha256, by which
+plot_results.py refuses an episodes.csv that is not whole.
 """
 
 from pgg_utils import startup  # first: a Ctrl-C during the imports below is one line, status 130
@@ -81,6 +83,7 @@ from pgg_utils.files import (
     lock_directory,
     one_line_errors,
     write_csv_atomic,
+    write_record,
 )
 from pgg_utils.identity import configuration, configuration_fields
 from pgg_utils.processes import die_with_parent
@@ -579,6 +582,9 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path], skipped: lis
         write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
         evaluated = [evaluations[c].record | {"config": labels[c]} for c in sorted(evaluations) if c not in withheld]
         write_csv_atomic(output / "evaluated_by.csv", EVALUATED_BY_COLUMNS, evaluated)
+        # What the sweep wrote, by rows and digest: the tables refuse an episodes.csv that is not (plot_results).
+        write_record(output, {"episodes.csv": len(rows), "summary.csv": len(summary), "skipped.csv": len(skipped)},
+                     "eval_gamma_sweep.py")  # fmt: skip
     except KeyboardInterrupt:
         raise SweepInterrupted(
             f"{len(finished)} of the sweep's {len(cells)} cells are finished in {output / 'cells'}; "

@@ -50,12 +50,19 @@ Writes into --output (and prints each path):
   outputs.txt                   the files above that this run wrote. A rerun into the same folder
                                 removes those the previous run listed and it did not write again (a
                                 previous grid's figures), and no other file
+
+--output is locked while it is written (a second plot_results.py or reproduce.py into it is refused).
+Partial inputs are never tabled as whole: an episodes.csv that differs from its sweep's written.csv
+(rows and sha256) is refused; without one, so is a cell with fewer episodes than the file's other cells,
+and a cell with fewer seeds than the other cells of its configuration is named in a printed note and
+in the tables ("(4 of 5 seeds)"). --runs draws only whole runs: one whose events hold no episodic
+return or end before its total_timesteps or its last checkpoint is left out and named (a printed note,
+and in its panel).
 """
 
 from pgg_utils import startup  # first: a Ctrl-C during the imports below is one line, status 130
 
 # isort: split
-import csv
 import json
 import logging
 import math
@@ -84,7 +91,18 @@ from pgg_utils.agreement import (
 )
 from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.figures import cell_index, ordered_series
-from pgg_utils.files import MANIFEST, InputError, read_csv, read_manifest, remove_stale, write_atomic, write_manifest
+from pgg_utils.files import (
+    MANIFEST,
+    InputError,
+    LockedError,
+    check_record,
+    read_csv,
+    read_csv_columns,
+    read_manifest,
+    remove_stale,
+    write_atomic,
+    write_manifest,
+)
 from pgg_utils.identity import configuration, is_mujoco, variant_id
 from pgg_utils.paper import PAPER_ENVS, action_kind, paper_name, variant_rank
 from pgg_utils.seeds import cell_of, check_one_run_per_seed
@@ -183,24 +201,38 @@ def read_episodes(paths) -> list[dict]:
         path = sweep_csv(raw)
         if not path.exists():
             raise InputError(f"no sweep CSV at {path}")
-        with open(path, newline="") as f:
-            reader = csv.DictReader(f)
-            if reader.fieldnames is None:
-                raise InputError(f"{path} is empty")
-            missing = REQUIRED_COLUMNS - set(reader.fieldnames or [])
-            if missing:
-                raise InputError(
-                    f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?"
-                )
-            for line, row in enumerate(reader, start=2):
-                check_values(row, f"{path}, line {line}")
-                row["config"] = row.get("config") or row["variant"]
-                row["kind"] = kind_of(row, path)
-                row["_source"] = str(path)
-                rows.append(row)
+        columns, of_file = read_csv_columns(path)
+        if columns is None:
+            raise InputError(f"{path} is empty")
+        missing = REQUIRED_COLUMNS - set(columns)
+        if missing:
+            raise InputError(f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?")
+        check_record(path, len(of_file))
+        for line, row in enumerate(of_file, start=2):
+            check_values(row, f"{path}, line {line}")
+            row["config"] = row.get("config") or row["variant"]
+            row["kind"] = kind_of(row, path)
+            row["_source"] = str(path)
+        check_whole_cells(of_file, path)
+        rows.extend(of_file)
     check_one_kind(rows)
     check_not_pooled(rows)
     return rows
+
+
+def check_whole_cells(rows: list[dict], path: Path) -> None:
+    """A sweep evaluates every cell of one CSV (run, step, γ, evaluation mode) for the same number of
+    episodes: InputError where a cell holds fewer than the others, the mark of a cut or edited file."""
+    counts = defaultdict(int)
+    for row in rows:
+        counts[(*configuration(row), row["seed"], *cell_of(row))] += 1
+    most = max(counts.values(), default=0)
+    short = {cell: n for cell, n in counts.items() if n < most}
+    if short:
+        (env, _, config, _, _, seed, step, gamma, *_), n = next(iter(short.items()))
+        raise InputError(f"{path}: {len(short)} cell(s) hold fewer episodes than the other cells' {most}, e.g. {env} "
+                         f"{config} seed {seed} at step {step}, eval γ {gamma}: {n} (a cut or edited file); rerun the "
+                         "sweep to write it whole")  # fmt: skip
 
 
 NUMBER_COLUMNS = ("return", "train_guidance", "cond_dropout", "eval_guidance")
@@ -322,7 +354,37 @@ def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
             "mujoco": mujoco_of(env, config, sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
             **code_of(sources[key[:5]], provenance),
         })  # fmt: skip
+    # A cell's siblings are the other cells of its configuration and evaluation mode: a run missing from
+    # one (a cut file, a run stopped before its last checkpoint) leaves it with fewer seeds, which it says.
+    most = defaultdict(int)
+    for r in out:
+        most[sibling_key(r)] = max(most[sibling_key(r)], r["n_seeds"])
+    for r in out:
+        r["of_seeds"] = most[sibling_key(r)]
     return out
+
+
+def sibling_key(row: dict) -> tuple:
+    return (row["env_id"], row["variant"], row["config"], row["train_guidance"], row["cond_dropout"], row["policy"],
+            row["null_branch"])  # fmt: skip
+
+
+def seeds_short(row: dict) -> str:
+    """`4 of 5 seeds` where a summary cell holds fewer seeds than its siblings (summarise), else ""."""
+    most = row.get("of_seeds", row["n_seeds"])
+    return f"{row['n_seeds']} of {most} seeds" if row["n_seeds"] < most else ""
+
+
+def short_cells_note(summary: list[dict], shown: int = 5) -> str | None:
+    """The line that names the cells with fewer seeds than their siblings, or None where there are none."""
+    short = [r for r in summary if seeds_short(r)]
+    if not short:
+        return None
+    named = "; ".join(f"{r['env_id']} {series_id(r['variant'], r['series'])} at step {r['step']}, "
+                      f"eval γ {r['eval_guidance']:g} ({seeds_short(r)})" for r in short[:shown])  # fmt: skip
+    more = f"; and {len(short) - shown} more" if len(short) > shown else ""
+    return (f"note: {len(short)} cell(s) hold fewer seeds than the other cells of their configuration, and say so "
+            f"in the tables: {named}{more}")  # fmt: skip
 
 
 def code_of(sources, provenance: dict | None) -> dict:
@@ -353,13 +415,16 @@ def run_config(run_args: dict, siblings: list[dict]) -> str:
     return " ".join(f"{k}={run_args.get(k, 'default')}" for k in differing)
 
 
-def training_curves(run_paths) -> dict:
-    """{(env, variant, configuration label): [(steps, returns) per seed]}: the episodic training returns
-    (TensorBoard charts/episodic_return) of the runs under `run_paths`, labelled as the sweeps' configurations
-    are (only the arguments in which runs of one env and variant differ)."""
+def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
+    """({(env, variant, configuration label): [(steps, returns) per seed]}, [(env, run directory, why)
+    per run left out]): the episodic training returns (TensorBoard charts/episodic_return) of the runs under
+    `run_paths`, labelled as the sweeps' configurations are (only the arguments in which runs of one env
+    and variant differ). Only whole runs are drawn: a run whose events hold no episodic returns (missing
+    or damaged) or end before its total_timesteps (cut or damaged events, or an unfinished run) is left
+    out, and named (incomplete_run)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    runs = []  # (run arguments, variant, steps, returns, run directory)
+    runs, left_out = [], []  # (run arguments, variant, steps, returns, run directory); (env, run directory, why)
     for args_file in run_args_files(run_paths):
         run_args = json.loads(args_file.read_text())
         # A resumed run's events overlap the first session's past its checkpoint: the reader drops them,
@@ -367,14 +432,16 @@ def training_curves(run_paths) -> dict:
         logging.getLogger("tensorboard").setLevel(logging.ERROR)
         accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
         accumulator.Reload()
-        if "charts/episodic_return" not in accumulator.Tags()["scalars"]:
+        if why := incomplete_run(args_file.parent, run_args, accumulator):
+            left_out.append((run_args.get("env_id", "?"), args_file.parent, why))
             continue
         events = accumulator.Scalars("charts/episodic_return")
         variant = variant_id(run_args)
         steps, returns = np.array([e.step for e in events]), np.array([e.value for e in events])
         runs.append((run_args, variant, steps, returns, args_file.parent))
     if not runs:
-        raise InputError(f"no TensorBoard episodic returns under {', '.join(run_paths)}")
+        why = f": {'; '.join(f'{run_dir}: {why}' for _, run_dir, why in left_out)}" if left_out else ""
+        raise InputError(f"no TensorBoard episodic returns under {', '.join(run_paths)} of a whole run{why}")
     siblings = defaultdict(list)
     for run_args, variant, *_ in runs:
         siblings[(run_args["env_id"], variant)].append(run_args)
@@ -387,7 +454,27 @@ def training_curves(run_paths) -> dict:
             raise InputError(f"two runs of one configuration and seed {run_args['seed']}: {first} and {run_dir} "
                              "(e.g. runs of two roots or MuJoCo versions); plot them apart")  # fmt: skip
         curves[(run_args["env_id"], variant, label)].append((steps, returns))
-    return curves
+    return curves, left_out
+
+
+def incomplete_run(run_dir: Path, run_args: dict, accumulator) -> str | None:
+    """Why a run's TensorBoard events cannot be drawn as a whole run, or None where they can: they hold
+    no episodic return, or they end (the last step of any scalar; every training iteration logs its
+    losses at its global step) before the run's total_timesteps or its last checkpoint."""
+    from pgg_utils.runs import CHECKPOINT_GLOB, checkpoint_step  # torch: only where --runs is given
+
+    tags = accumulator.Tags()["scalars"]
+    if "charts/episodic_return" not in tags:
+        return "its TensorBoard events hold no episodic return (missing or damaged)"
+    events_end = max(event.step for tag in tags for event in accumulator.Scalars(tag))
+    checkpoints = [name.name for name in (run_dir / "checkpoints").glob(CHECKPOINT_GLOB)]
+    checkpoint_end = max((checkpoint_step(name) for name in checkpoints if name[5:-3].isdigit()), default=0)
+    total = run_args.get("total_timesteps")
+    if events_end >= max(checkpoint_end, total if isinstance(total, int) else 0):
+        return None
+    if checkpoint_end > events_end:
+        return f"its events end at step {events_end:,}, its checkpoints at {checkpoint_end:,} (cut or damaged)"
+    return f"its events end at step {events_end:,} of its {total:,} (unfinished)"
 
 
 # --- provenance -----------------------------------------------------------------------------------
@@ -468,7 +555,8 @@ def fmt_cell(row: dict | None, latex: bool) -> str:
     mean, ci = float(row["mean"]), float(row["ci95"])
     text = f"{mean:.1f}" if math.isnan(ci) else (f"{mean:.1f} \\pm {ci:.1f}" if latex else f"{mean:.1f} ± {ci:.1f}")
     mark = ("^\\dagger" if latex else "†") if other_mujoco(row) else ""
-    return f"${text}{mark}$" if latex else text + mark
+    short = f" ({seeds_short(row)})" if seeds_short(row) else ""
+    return f"${text}{mark}${short}" if latex else text + mark + short
 
 
 def gamma_label(gamma: float, latex: bool) -> str:
@@ -651,9 +739,29 @@ def simple_markdown(rows: list[dict]) -> str:
 
 def generate(args: Args) -> list[Path]:
     """Writes every output into --output, then its manifest, and removes the files the previous run
-    listed and this one did not write. Returns the paths written. An interrupted run leaves a manifest
-    of what either run wrote, so that the next run still finds every file to remove."""
+    listed and this one did not write, holding --output's lock throughout. Returns the paths written.
+    An interrupted run leaves a manifest of what either run wrote, so that the next run still finds
+    every file to remove."""
     validate(args)
+    lock = claim_output(Path(args.output))
+    try:
+        return generate_locked(args)
+    finally:
+        lock.close()
+
+
+def claim_output(output: Path, flag: str = "--output"):
+    """The lock of an output folder (files.lock_directory), held by whoever writes into it: two writers
+    would leave the tables of one sweep beside the figures of another. InputError with one line where
+    another process holds it."""
+    try:
+        return files.lock_directory(output, "another process writing into it")
+    except LockedError as e:
+        raise InputError(f"{e}; wait for it to finish or choose another {flag}") from None
+
+
+def generate_locked(args: Args) -> list[Path]:
+    """generate's work, for a caller that validated `args` and holds --output's lock (claim_output)."""
     output = Path(args.output)
     previous = read_manifest(output)
     written: list[Path] = []
@@ -677,6 +785,8 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     provenance = read_provenance(args.provenance)
     episodes = read_episodes(args.sweeps)
     summary = summarise(select_mode(episodes, args.policy, args.null_branch), provenance)
+    if note := short_cells_note(summary):
+        print(note, file=sys.stderr)
     if len({(r["policy"], r["null_branch"]) for r in episodes}) > 1:
         write(output / "controls.md", controls_table(summarise(episodes, provenance)), written)
     if args.provenance:
@@ -725,7 +835,10 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
             of_kind = aggregate_iqm([r for r in summary if r["kind"] == kind])
             save_figure(figures.aggregate_intervals(of_kind, kind), output / f"aggregate_iqm_{kind}", written)
     if args.runs:
-        save_figure(figures.learning_curves(training_curves(args.runs)), output / "learning_curves", written)
+        curves, left_out = training_curves(args.runs)
+        for _, run_dir, why in left_out:
+            print(f"note: the learning curves leave out {run_dir}: {why}", file=sys.stderr)
+        save_figure(figures.learning_curves(curves, left_out), output / "learning_curves", written)
     comparison = compare_with_paper(summary) if args.compare_paper else None
     if comparison is not None:  # None where no swept task is the paper's: their tables and figures are the results
         tasks = task_summaries(comparison, summary)

@@ -9,13 +9,15 @@ The grid is environments × seeds × training variants:
   ppo          PPO, γ_train = 1 (the null embedding gets no gradient: CleanRL's PPO algorithm)
   pgg_g1.1     PGG, γ_train = 1.1, no dropout (the paper's main variant)
   pgg_drop0.1  PGG, γ_train = 1, conditioning dropout 0.1
+
 Run directories are <root>/<env>__<variant>__s<seed>, logs <root>/logs/<run>.log. Every argument is
 checked before anything is trained (one line, exit 2). Rerunning the same command skips every run whose
 final checkpoint exists, resumes a half-finished run from its last checkpoint (bit for bit, see the
 training scripts' --resume) and skips every finished sweep cell, so killing the launcher loses at most
 the work since each run's last checkpoint: its local training children die with it, even when it is
 SIGKILLed (Linux); SIGINT or SIGTERM also cancels submitit jobs. Preempted Slurm array tasks are
-requeued and resume the same way. The sweep CSVs, tables and figures go to <results>.
+requeued and resume the same way. The sweep CSVs, tables and figures go to <results>, locked against
+a second launcher or plot_results.py for as long as this one runs, as <root> is.
 """
 
 from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
@@ -41,6 +43,7 @@ import plot_results
 from pgg_utils import paper, processes, runs, scripts
 from pgg_utils.arguments import env_id_in_path, guidance_error
 from pgg_utils.files import (
+    RECORD,
     InputError,
     LockedError,
     check_writable,
@@ -385,9 +388,16 @@ def reproduce(args: Args) -> int:
     specs = grid(args)
     results = Path(args.results or f"results/{args.preset}")
     plot_results.check_writable(results)  # before hours of training, not after
-    lock = claim_root(Path(specs[0].root))
+    root = Path(specs[0].root)
+    lock = claim_root(root)
     try:
-        return reproduce_locked(args, specs, results)
+        # A second launcher into the same results would mix its tables with this one's agents.
+        results_lock = None if results.resolve() == root.resolve() else plot_results.claim_output(results, "--results")
+        try:
+            return reproduce_locked(args, specs, results)
+        finally:
+            if results_lock is not None:
+                results_lock.close()
     finally:
         lock.close()
 
@@ -430,10 +440,12 @@ def reproduce_locked(args: Args, specs: list[RunSpec], results: Path) -> int:
     sweep_args = eval_gamma_sweep.Args(paths=tuple(str(s.run_dir) for s in swept), output=str(Path(specs[0].root) / "sweep"),
                                        gammas=chosen.gammas, episodes=chosen.episodes, workers=args.workers)  # fmt: skip
     sweep_dir = eval_gamma_sweep.sweep(sweep_args)
-    for name in ("episodes.csv", "summary.csv"):
+    for name in ("episodes.csv", "summary.csv", RECORD):  # with the sweep's record, by which the tables check it
         write_atomic(results / name, (sweep_dir / name).read_bytes())
-    written = plot_results.generate(plot_results.Args(sweeps=(str(results),), output=str(results),
-                                                      runs=sweep_args.paths, compare_paper=True))  # fmt: skip
+    plot_args = plot_results.Args(sweeps=(str(results),), output=str(results), runs=sweep_args.paths,
+                                  compare_paper=True)  # fmt: skip
+    plot_results.validate(plot_args)
+    written = plot_results.generate_locked(plot_args)  # reproduce holds the lock of <results>
     if args.agents:
         written.append(export_agents(swept, results / "agents"))
     print(f"results in {results}: {len(written)} files", file=sys.stderr)

@@ -3,13 +3,12 @@ written atomically, each row with a checksum. A sweep reuses a cell only where t
 every checksum holds, so an interrupted sweep loses only the cells in flight and a damaged or foreign
 file is evaluated again."""
 
-import csv
 import hashlib
 import json
 from pathlib import Path
 
 from pgg_utils import runs
-from pgg_utils.files import read_csv, write_csv_atomic
+from pgg_utils.files import InputError, read_csv, write_csv_atomic
 
 # Part of every cell's identity; raised when a fix changes what a cell evaluates to or holds, so that a
 # rerun recomputes cells from before it. 2: continuous actions clipped to the env's bounds. 3: each cell
@@ -70,7 +69,9 @@ def read_cell(path: Path, episodes: int) -> list[dict]:
     edited value, a row of another cell), or episodes other than 0..episodes-1 each once."""
     try:
         rows = read_csv(path)
-    except (OSError, UnicodeDecodeError, csv.Error) as e:  # random bytes, a NUL, a directory in its place
+    except InputError:  # random bytes, a NUL: not CSV text (read_csv says so)
+        raise ValueError("unreadable (not CSV text)") from None
+    except OSError as e:  # a directory in its place
         raise ValueError(f"unreadable ({type(e).__name__})") from None
     if len(rows) != episodes:
         raise ValueError(f"{len(rows)} rows, not {episodes}")

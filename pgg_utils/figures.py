@@ -7,7 +7,9 @@ No torch; the matplotlib backend is the caller's (plot_results sets Agg)."""
 import io
 import itertools
 import math
+import pickle
 import zlib
+from pathlib import Path
 
 import matplotlib.colors
 import matplotlib.figure
@@ -67,6 +69,7 @@ def cell_index(summary: list[dict]) -> dict:
 def render(fig) -> dict[str, bytes]:
     """{"png": ..., "pdf": ...}: the figure rendered in memory (the PDF without a date, so that it
     regenerates bit for bit), and closed."""
+    separate_titles(fig)
     images = {}
     for image_format, metadata in (("png", None), ("pdf", {"CreationDate": None})):
         image = io.BytesIO()
@@ -74,6 +77,36 @@ def render(fig) -> dict[str, bytes]:
         images[image_format] = image.getvalue()
     plt.close(fig)
     return images
+
+
+def separate_titles(fig) -> None:
+    """Breaks the titles of side-by-side panels that would overlap (a long task name with its notes)
+    onto two lines, before the parenthesis of their notes, else before their last comma. The overlap
+    is measured on a laid-out copy of the figure: a figure whose titles fit is not touched, and draws
+    exactly as before."""
+    for _ in range(3):  # a broken title can still be too wide: break it again
+        laid_out = pickle.loads(pickle.dumps(fig))
+        laid_out.draw_without_rendering()
+        renderer = laid_out.canvas.get_renderer()
+        boxes = [ax.title.get_window_extent(renderer) if ax.get_visible() and ax.get_title() else None
+                 for ax in laid_out.axes]  # fmt: skip
+        plt.close(laid_out)
+        crowded = {i for i, a in enumerate(boxes) for j, b in enumerate(boxes) if i != j and a and b and a.overlaps(b)}
+        if not [i for i in sorted(crowded) if break_title(fig.axes[i].title)]:
+            return
+
+
+def break_title(title) -> bool:
+    """Breaks the widest line of a title once (separate_titles); False where it has no place to break."""
+    lines = title.get_text().split("\n")
+    widest = max(range(len(lines)), key=lambda i: len(lines[i]))
+    line = lines[widest]
+    at, skip = (line.index(" ("), 1) if " (" in line else (line.rfind(", "), 2)
+    if at <= 0:
+        return False
+    lines[widest : widest + 1] = [line[: at + (1 if skip == 2 else 0)], line[at + skip :]]
+    title.set_text("\n".join(lines))
+    return True
 
 
 def panels(n: int, cols: int | None = None):
@@ -393,14 +426,22 @@ def gamma_response(summary, envs, step):
     return fig
 
 
-def learning_curves(curves: dict, bins: int = 50, min_points: int = 5) -> matplotlib.figure.Figure:
+def learning_curves(curves: dict, left_out=(), bins: int = 50, min_points: int = 5) -> matplotlib.figure.Figure:
     """Episodic training return against steps, one panel per env, from `curves` ({(env, variant,
     configuration label): [(steps, returns) per seed]}, plot_results.training_curves): per variant and
     configuration the mean over seeds of each seed's mean in each of `bins` step bins, with the t 95% CI.
-    Draws whatever points exist and says so in the panel when they are too few for a curve."""
-    envs = sorted({env for env, _, _ in curves})
+    Draws whatever points exist and says so in the panel when they are too few for a curve. `left_out`:
+    (env, run directory, why) of each run not drawn, named in its env's panel."""
+    envs = sorted({env for env, _, _ in curves} | {env for env, _, _ in left_out})
     fig, axes = panels(len(envs))
     for ax, env in zip(axes, envs):
+        skipped = [f"{Path(run_dir).name}: {why}" for e, run_dir, why in left_out if e == env]
+        if skipped:
+            ax.text(0.02, 0.98, "left out, not whole:\n" + "\n".join(skipped), transform=ax.transAxes, fontsize=5,
+                    va="top", color="firebrick", wrap=True)  # fmt: skip
+        if not any(e == env for e, _, _ in curves):
+            style_axis(ax, env, "training steps", "episodic return", steps_on_x=True)
+            continue
         drawn, notes = [], []
         of_env = [((v, label), seeds) for (e, v, label), seeds in curves.items() if e == env]
         for (variant, label), seeds in sorted(of_env, key=lambda kv: (variant_rank(kv[0][0]), kv[0])):

@@ -4,6 +4,7 @@ import contextlib
 import csv
 import errno
 import fcntl
+import hashlib
 import io
 import os
 import sys
@@ -93,9 +94,22 @@ def write_csv_atomic(path: Path, columns: list[str], rows: list[dict]) -> None:
     write_atomic(path, csv_text(columns, rows))
 
 
+def read_csv_columns(path: Path) -> tuple[list[str] | None, list[dict]]:
+    """(its header, or None for an empty file; its rows) of a CSV. InputError with one line where the
+    file is not CSV text (random bytes, a binary file), never a UnicodeDecodeError's traceback."""
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            reader = csv.DictReader(f)
+            return reader.fieldnames, list(reader)
+    except UnicodeDecodeError as e:
+        raise InputError(f"{path} is not a CSV: byte {e.start} is not UTF-8 text") from None
+    except csv.Error as e:
+        raise InputError(f"{path} is not a CSV: {e}") from None
+
+
 def read_csv(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return list(csv.DictReader(f))
+    """Every row of a CSV (read_csv_columns)."""
+    return read_csv_columns(path)[1]
 
 
 class LockedError(Exception):
@@ -183,3 +197,39 @@ def remove_stale(folder: Path, names: set[str]) -> list[Path]:
             path.unlink()
             removed.append(path)
     return removed
+
+
+# --- a folder's record: the CSVs a command wrote, by rows and digest, so that a reader can tell them whole ---
+
+RECORD = "written.csv"
+
+
+def sha256_of(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def write_record(folder: Path, rows_of: dict[str, int], writer: str) -> None:
+    """Records, in `folder`/written.csv, each named file of `folder` with its number of rows and the
+    sha256 of its bytes as they are on disk now (written after the files themselves: a crash in between
+    leaves a record that no longer matches, which a reader refuses rather than trusts)."""
+    rows = [{"file": name, "rows": count, "sha256": sha256_of(Path(folder) / name), "writer": writer}
+            for name, count in sorted(rows_of.items())]  # fmt: skip
+    write_csv_atomic(Path(folder) / RECORD, ["file", "rows", "sha256", "writer"], rows)
+
+
+def check_record(path: Path, rows_read: int) -> bool:
+    """True where `path`'s folder records it (write_record) and it is what was written; False where no
+    record names it (a file of an older sweep, or one copied without its record). InputError with one
+    line where it differs from its record: a partial, cut or edited file is never read as whole."""
+    path = Path(path)
+    record_path = path.parent / RECORD
+    if not record_path.is_file():
+        return False
+    entry = next((r for r in read_csv(record_path) if r.get("file") == path.name), None)
+    if entry is None:
+        return False
+    if sha256_of(path) != entry.get("sha256"):
+        raise InputError(f"{path} is not the file its {entry.get('writer') or 'writer'} wrote: it holds {rows_read} "
+                         f"rows, {record_path} records {entry.get('rows')} and another digest (a partial, cut or edited "
+                         f"file); rerun what wrote it, or remove {record_path} to have the file checked by its contents alone")  # fmt: skip
+    return True

@@ -1,6 +1,7 @@
 import csv
 import itertools
 import math
+import os
 import re
 import subprocess
 import sys
@@ -14,7 +15,7 @@ from scipy import stats
 import plot_results as plots
 from pgg_utils import figures, paper
 from pgg_utils.figures import PAPER_DROPOUT_FIGURE_YLIM
-from pgg_utils.files import read_csv
+from pgg_utils.files import LOCK_FILE, lock_directory, read_csv, write_record
 from pgg_utils.stats import (
     bootstrap_coverage,
     detectable_gap,
@@ -442,7 +443,7 @@ def test_a_rerun_removes_the_outputs_of_the_previous_run_it_does_not_write_again
     outside.write_text("outside the folder")
     (out / "outputs.txt").write_text((out / "outputs.txt").read_text() + "../outside.md\n")
     second = run("cartpole.csv")
-    assert {p.name for p in out.iterdir()} == {p.name for p in second} | {"notes.md", "learning_curves.png"}
+    assert {p.name for p in out.iterdir()} == {p.name for p in second} | {"notes.md", "learning_curves.png", LOCK_FILE}
     assert not (out / "table_continuous.md").exists() and outside.exists()
     assert listed() == {p.name for p in second} - {"outputs.txt"}
 
@@ -455,7 +456,7 @@ def test_a_rerun_removes_the_outputs_of_the_previous_run_it_does_not_write_again
     assert {"table_continuous.md", "aggregate_iqm.md"} <= listed()  # this run's files and the previous run's
     monkeypatch.undo()
     third = run("cartpole.csv")
-    assert {p.name for p in out.iterdir()} == {p.name for p in third} | {"notes.md", "learning_curves.png"}
+    assert {p.name for p in out.iterdir()} == {p.name for p in third} | {"notes.md", "learning_curves.png", LOCK_FILE}
 
 
 # --- figures --------------------------------------------------------------------------------------
@@ -637,7 +638,7 @@ def test_learning_curves_draw_few_points_and_say_so(sweep_dir, tmp_path):
         for step, value in ((512, 20.0 + seed), (1024, 40.0 + seed)):  # episodes logged at two steps only
             writer.add_scalar("charts/episodic_return", value, step)
         writer.close()
-    fig = figures.learning_curves(plots.training_curves([str(tmp_path / "runs")]))
+    fig = figures.learning_curves(*plots.training_curves([str(tmp_path / "runs")]))
     ax = fig.axes[0]
     line = next(line for line in ax.get_lines() if line.get_label() == "PGG, γ_train = 1.1 (n=2, no CI band)")
     assert list(line.get_ydata()) == [21.5, 41.5] and line.get_marker() == "o"
@@ -705,6 +706,7 @@ def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
         ("columns", [], "lacks columns"),
         ("unknown_env", [], "records no action_space for MyEnv-v0, and cannot make environment 'MyEnv-v0'"),
         ("two_kinds", [], "CartPole-v1 has discrete actions in"),
+        ("random_bytes", [], "is not a CSV: byte 128 is not UTF-8 text"),
     ],
 )
 def test_bad_input_exits_with_one_line(tmp_path, setup, extra, message):
@@ -718,6 +720,8 @@ def test_bad_input_exits_with_one_line(tmp_path, setup, extra, message):
     elif setup == "two_kinds":
         cell = {("CartPole-v1", "ppo", 1000, 1.0): [1.0, 2.0]}
         write_episodes(target, episode_rows(cell) + episode_rows(cell, run_suffix="b", action_space="continuous"))
+    elif setup == "random_bytes":
+        target.write_bytes(bytes(range(256)) * 8)
     one_error_line(run_cli(target, "--output", tmp_path / "o", *extra), message)
 
 
@@ -910,3 +914,134 @@ def test_a_rerun_without_runs_keeps_the_learning_curves_a_run_with_them_drew(tmp
     plots.generate(plots.Args(sweeps=(str(tmp_path / "a.csv"),), output=str(out)))
     assert (out / "learning_curves.png").read_bytes() == b"drawn from --runs"
     assert "learning_curves.png" in (out / "outputs.txt").read_text()
+
+
+# --- partial inputs, damaged events, two writers: refused or named, never drawn as whole -------------
+
+
+def test_a_cell_with_fewer_episodes_than_the_others_is_refused(sweep_dir, tmp_path):
+    """A file cut inside a cell (or one episode row deleted) is no sweep's output: one line, exit 2."""
+    lines = (sweep_dir / "episodes.csv").read_text().splitlines(keepends=True)
+    (sweep_dir / "episodes.csv").write_text("".join(lines[:-1]))  # the last cell loses an episode
+    one_error_line(
+        run_cli(sweep_dir, "--output", tmp_path / "o"), "1 cell(s) hold fewer episodes than the other cells' 2"
+    )
+
+
+def test_cells_with_fewer_seeds_than_their_siblings_are_named(sweep_dir, tmp_path):
+    """A file cut at a cell boundary loses the last run's later cells: they hold fewer seeds than the
+    other cells of their configuration, and say so in the tables and in a printed line."""
+    rows = episode_rows(SEED_MEANS)
+    cut = [r for r in rows if not (r["run"] == "Acrobot-v1__pgg_g1.1__s3" and r["step"] == 200000)]
+    write_episodes(sweep_dir / "episodes.csv", cut)
+    proc = run_cli(sweep_dir, "--output", tmp_path / "o")
+    assert proc.returncode == 0, proc.stderr
+    assert "note: 2 cell(s) hold fewer seeds than the other cells of their configuration" in proc.stderr
+    assert "Acrobot-v1 pgg_g1.1 at step 200000, eval γ 1 (2 of 3 seeds)" in proc.stderr
+    table = (tmp_path / "o" / "table_discrete.md").read_text()
+    assert "| -86.5 ± 6.4 (2 of 3 seeds) |" in table and "| -83.5 ± 6.4 (2 of 3 seeds) |" in table
+    assert "$-86.5 \\pm 6.4$ (2 of 3 seeds)" in (tmp_path / "o" / "table_discrete.tex").read_text()
+
+
+def test_an_episodes_csv_that_differs_from_its_sweeps_record_is_refused(sweep_dir, tmp_path):
+    """The sweep records what it wrote (written.csv: rows and sha256): a file cut at any line, even at a
+    cell boundary that leaves every cell whole, is refused in one line."""
+    path = sweep_dir / "episodes.csv"
+    write_record(sweep_dir, {"episodes.csv": len(read_csv(path))}, "eval_gamma_sweep.py")
+    assert run_cli(sweep_dir, "--output", tmp_path / "o").returncode == 0
+    lines = path.read_text().splitlines(keepends=True)
+    path.write_text("".join(lines[: 1 + 2 * 3 * 11]))  # the first 11 cells' 3 seeds × 2 episodes: only the 12th gone
+    one_error_line(run_cli(sweep_dir, "--output", tmp_path / "o"),
+                   f"{path} is not the file its eval_gamma_sweep.py wrote: it holds 66 rows, "
+                   f"{sweep_dir / 'written.csv'} records 72")  # fmt: skip
+
+
+def test_a_second_writer_into_one_output_folder_is_refused(sweep_dir, tmp_path):
+    """Two plot_results.py into one --output would leave one sweep's tables beside the other's figures."""
+    out = tmp_path / "o"
+    out.mkdir()
+    lock = lock_directory(out, "a test")  # as a plot_results.py at work in it holds it
+    try:
+        proc = run_cli(sweep_dir, "--output", out)
+    finally:
+        lock.close()
+    one_error_line(proc, f"{out} is in use by another process writing into it (pid {os.getpid()}); wait for it")
+    assert sorted(p.name for p in out.iterdir()) == [LOCK_FILE]
+    assert run_cli(sweep_dir, "--output", out).returncode == 0  # the lock free
+
+
+def write_run(root, name: str, seed: int, events_end: int, total: int = 4096, checkpoints=()) -> None:
+    from torch.utils.tensorboard import SummaryWriter
+
+    run = root / name
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "args.json").write_text(f'{{"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": {seed}, '
+                                   f'"total_timesteps": {total}}}')  # fmt: skip
+    for step in checkpoints:
+        (run / "checkpoints" / f"step_{step:09d}.pt").write_bytes(b"")
+    writer = SummaryWriter(str(run))
+    for step in range(512, events_end + 1, 512):
+        writer.add_scalar("charts/episodic_return", 20.0 + seed, step)
+        writer.add_scalar("losses/value_loss", 1.0, step)
+    writer.close()
+
+
+def test_runs_with_damaged_short_or_missing_events_are_left_out_and_named(sweep_dir, tmp_path):
+    """A run's curve is drawn only where its events reach its total_timesteps: events of random bytes,
+    events cut short of the run's checkpoints, and an unfinished run are each named, not drawn."""
+    root = tmp_path / "runs"
+    write_run(root, "CartPole-v1__pgg_g1.1__s1", 1, 4096, checkpoints=(2048, 4096))
+    write_run(root, "CartPole-v1__pgg_g1.1__s2", 2, 4096, checkpoints=(2048, 4096))
+    (events,) = (root / "CartPole-v1__pgg_g1.1__s2").glob("events.out.tfevents.*")
+    events.write_bytes(np.random.default_rng(0).bytes(events.stat().st_size))  # damaged beyond reading
+    write_run(root, "CartPole-v1__pgg_g1.1__s3", 3, 1024, checkpoints=(2048, 4096))  # cut: events end early
+    write_run(root, "CartPole-v1__pgg_g1.1__s4", 4, 2048, checkpoints=(2048,))  # unfinished: stopped at 2048
+    curves, left_out = plots.training_curves([str(root)])
+    assert [len(seeds) for seeds in curves.values()] == [1]  # s1 alone is whole
+    assert [(run.name, why) for _, run, why in left_out] == [
+        ("CartPole-v1__pgg_g1.1__s2", "its TensorBoard events hold no episodic return (missing or damaged)"),
+        ("CartPole-v1__pgg_g1.1__s3", "its events end at step 1,024, its checkpoints at 4,096 (cut or damaged)"),
+        ("CartPole-v1__pgg_g1.1__s4", "its events end at step 2,048 of its 4,096 (unfinished)"),
+    ]
+    fig = figures.learning_curves(curves, left_out)
+    assert legend_labels_of_axes(fig) == ["PGG, γ_train = 1.1 (n=1, no CI band)"]
+    assert any("left out, not whole" in t.get_text() and "CartPole-v1__pgg_g1.1__s3: its events end at step 1,024"
+               in t.get_text() for t in fig.axes[0].texts)  # fmt: skip
+    matplotlib.pyplot.close(fig)
+    proc = run_cli(sweep_dir, "--runs", root, "--output", tmp_path / "o")
+    assert proc.returncode == 0, proc.stderr
+    assert (
+        f"note: the learning curves leave out {root / 'CartPole-v1__pgg_g1.1__s2'}: its TensorBoard events"
+        in proc.stderr
+    )
+    for run in ("s1", "s2", "s3"):
+        (root / f"CartPole-v1__pgg_g1.1__{run}").rename(tmp_path / run)  # s4 alone, unfinished
+    one_error_line(run_cli(sweep_dir, "--runs", root, "--output", tmp_path / "o"),
+                   f"no TensorBoard episodic returns under {root} of a whole run: {root / 'CartPole-v1__pgg_g1.1__s4'}: "
+                   "its events end at step 2,048 of its 4,096 (unfinished)")  # fmt: skip
+
+
+def legend_labels_of_axes(fig) -> list[str]:
+    return [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]
+
+
+def test_long_panel_titles_are_broken_rather_than_overlap(tmp_path):
+    """Side-by-side panels of long task names with their notes would overlap: their titles are broken
+    onto two lines before the notes; a figure whose titles fit draws as before."""
+    envs = ("InvertedDoublePendulum-v4", "HumanoidStandup-v4", "HalfCheetah-v4")
+    cells = {(env, "ppo", step, 1.0): [100.0, 101.0, 102.0] for env in envs for step in (100000, 200000)}
+    write_episodes(tmp_path / "a.csv", episode_rows(cells, config="mujoco=3.1.6", action_space="continuous"))
+    summary = summary_of(tmp_path / "a.csv")
+    fig = figures.figure_for_variant(summary, list(envs), "ppo")
+    figures.render(fig)  # what every figure goes through on its way to a file
+    assert fig.axes[0].get_title() == "InvertedDoublePendulum-v4\n(3 seeds, MuJoCo 3.1.6)"
+    fig = figures.figure_for_variant(summary, list(envs), "ppo")
+    figures.separate_titles(fig)
+    fig.draw_without_rendering()  # laid out as when it is saved
+    renderer = fig.canvas.get_renderer()
+    boxes = [ax.title.get_window_extent(renderer) for ax in fig.axes if ax.get_visible()]
+    assert not any(a.overlaps(b) for a, b in itertools.combinations(boxes, 2))
+    matplotlib.pyplot.close(fig)
+    short = figures.figure_for_variant(summary_of(tmp_path / "a.csv"), ["HalfCheetah-v4"], "ppo")
+    figures.render(short)
+    assert short.axes[0].get_title() == "HalfCheetah-v4 (3 seeds, MuJoCo 3.1.6)"

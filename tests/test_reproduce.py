@@ -11,7 +11,7 @@ from conftest import ROOT
 
 import reproduce
 from pgg_utils import runs
-from pgg_utils.files import lock_directory
+from pgg_utils.files import RECORD, InputError, lock_directory, read_csv, sha256_of
 
 TINY = ["--total-timesteps", "2048", "--checkpoint-interval", "1024", "--seeds", "2", "--variants", "ppo", "pgg_g1.1",
         "--gammas", "1", "2", "--episodes", "3"]  # fmt: skip
@@ -286,3 +286,44 @@ def test_bad_arguments_are_one_line_and_exit_2_before_anything_is_created(tmp_pa
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1, done.stderr
     assert done.stderr.startswith(message), done.stderr
     assert sorted(os.listdir(tmp_path)) == []
+
+
+def test_the_results_hold_the_sweeps_record_and_the_tables_refuse_a_cut_copy(local_results, tmp_path):
+    """The sweep's written.csv travels with its episodes.csv into the results; plot_results.py checks the
+    file against it, so that a copy cut at any line is refused, not tabled as whole."""
+    import plot_results
+
+    record = {r["file"]: r for r in read_csv(local_results / RECORD)}
+    assert record["episodes.csv"]["rows"] == str(2 * 2 * 2 * 2 * 3)
+    assert record["episodes.csv"]["sha256"] == sha256_of(local_results / "episodes.csv")
+    copy = tmp_path / "copy"
+    copy.mkdir()
+    (copy / RECORD).write_bytes((local_results / RECORD).read_bytes())
+    lines = (local_results / "episodes.csv").read_text().splitlines(keepends=True)
+    (copy / "episodes.csv").write_text("".join(lines[: 1 + 3 * 2]))  # two whole cells of the first run
+    with pytest.raises(InputError, match="is not the file its eval_gamma_sweep.py wrote: it holds 6 rows"):
+        plot_results.generate(plot_results.Args(sweeps=(str(copy),), output=str(tmp_path / "tables")))
+
+
+def test_a_second_launcher_into_the_same_results_is_refused_before_training(tmp_path):
+    """Two launchers with different --root and one --results would leave one grid's tables beside the
+    agents of both: the second is refused in one line, before it trains anything."""
+    args = tiny_args(tmp_path, "second", seeds=1, variants=("ppo",))
+    Path(args.results).mkdir(parents=True)
+    lock = lock_directory(Path(args.results), "a test")  # as a first launcher (or plot_results.py) holds it
+    try:
+        with pytest.raises(InputError, match=f"{args.results} is in use by .* choose another --results"):
+            reproduce.reproduce(args)
+    finally:
+        lock.close()
+    assert not any(Path(args.root).glob("CartPole-v1__*")), "the refused launcher trained"
+
+
+def test_help_ends_the_variant_list_before_the_next_sentence():
+    done = subprocess.run([sys.executable, str(ROOT / "reproduce.py"), "--help"], capture_output=True, text=True,
+                          timeout=120, env={**os.environ, "COLUMNS": "200"}, check=False)  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert any(
+        line.strip() == "pgg_drop0.1  PGG, γ_train = 1, conditioning dropout 0.1" for line in done.stdout.splitlines()
+    )
+    assert "dropout 0.1 Run directories" not in done.stdout
