@@ -89,7 +89,6 @@ from pgg_utils.agreement import (
     step_label,
     task_summaries,
 )
-from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.figures import cell_index, ordered_series
 from pgg_utils.files import (
     MANIFEST,
@@ -103,7 +102,7 @@ from pgg_utils.files import (
     write_atomic,
     write_manifest,
 )
-from pgg_utils.identity import configuration, is_mujoco, variant_id
+from pgg_utils.identity import configuration, configuration_fields, is_mujoco
 from pgg_utils.paper import PAPER_ENVS, action_kind, paper_name, variant_rank
 from pgg_utils.seeds import cell_of, check_one_run_per_seed
 from pgg_utils.stats import mean_ci95
@@ -112,9 +111,6 @@ ROOT = Path(__file__).resolve().parent
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
                     "null_branch", "seed", "return"}  # fmt: skip
 KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
-# Run arguments that do not change what is trained (or only its bits; pgg_utils.arguments names them),
-# and the seed: never part of a configuration.
-NOT_CONFIG_ARGS = RUN_ONLY_ARGS | {"seed"}
 # The eval γ a paper figure draws where it is fewer than its table's (its continuous dropout figure: 1.0-1.2).
 # Our figure of that variant draws the same range; the other swept γ go to fig_<kind>_<variant>_beyond_paper.
 PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}
@@ -408,52 +404,68 @@ def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
 # --- training curves (--runs) ---------------------------------------------------------------------
 
 
-def run_config(run_args: dict, siblings: list[dict]) -> str:
-    """The arguments in which a run differs from other runs of its env and variant (seed aside)."""
-    keys = sorted({k for a in siblings for k in a} - NOT_CONFIG_ARGS)
-    differing = [k for k in keys if len({json.dumps(a.get(k), sort_keys=True) for a in siblings}) > 1]
-    return " ".join(f"{k}={run_args.get(k, 'default')}" for k in differing)
+def last_checkpoint_of(run_dir: Path) -> dict | None:
+    """A run's last readable checkpoint (its record of what trained it), or None."""
+    from pgg_utils import runs  # torch: only where --runs is given
+
+    for path in reversed(runs.checkpoints_of(run_dir)):
+        try:
+            return runs.read_checkpoint_file(path)
+        except ValueError:
+            continue
+    return None
 
 
 def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
-    """({(env, variant, configuration label): [(steps, returns) per seed]}, [(env, run directory, why)
-    per run left out]): the episodic training returns (TensorBoard charts/episodic_return) of the runs under
-    `run_paths`, labelled as the sweeps' configurations are (only the arguments in which runs of one env
-    and variant differ). Only whole runs are drawn: a run whose events hold no episodic returns (missing
-    or damaged) or end before its total_timesteps (cut or damaged events, or an unfinished run) is left
-    out, and named (incomplete_run)."""
+    """({(env, variant, series): [(steps, returns) per seed]}, [(env, run directory, why) per run left
+    out]): the episodic training returns (TensorBoard charts/episodic_return) of the runs under
+    `run_paths`. A run's configuration is its last checkpoint's (identity.configuration_fields: the
+    script and every training argument, the sweep's and the tables' key), and its series is labelled as
+    the tables label theirs (config_labels), so a curve and a table row of one configuration carry one
+    name. Only whole runs are drawn: a run whose events hold no episodic returns (missing or damaged) or
+    end before its total_timesteps (cut or damaged events, or an unfinished run), or that has no readable
+    checkpoint, is left out and named (incomplete_run); one whose args.json disagrees with its
+    checkpoints is refused (runs.record_error)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    runs, left_out = [], []  # (run arguments, variant, steps, returns, run directory); (env, run directory, why)
+    from pgg_utils import runs as run_records  # torch: only where --runs is given
+
+    found, left_out = [], []  # (configuration, seed, steps, returns, run directory); (env, run directory, why)
     for args_file in run_args_files(run_paths):
-        run_args = json.loads(args_file.read_text())
+        run_dir = args_file.parent
+        ckpt = last_checkpoint_of(run_dir)
+        if error := run_records.record_error(run_dir, ckpt):
+            raise InputError(error)
+        run_args = ckpt["args"] if ckpt else json.loads(args_file.read_text())
         # A resumed run's events overlap the first session's past its checkpoint: the reader drops them,
         # as it should, with a warning per file that is no news to the user.
         logging.getLogger("tensorboard").setLevel(logging.ERROR)
-        accumulator = EventAccumulator(str(args_file.parent), size_guidance={"scalars": 0})
+        accumulator = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
         accumulator.Reload()
-        if why := incomplete_run(args_file.parent, run_args, accumulator):
-            left_out.append((run_args.get("env_id", "?"), args_file.parent, why))
+        why = incomplete_run(run_dir, run_args, accumulator) or (None if ckpt else "it has no readable checkpoint")
+        if why:
+            left_out.append((run_args.get("env_id", "?"), run_dir, why))
             continue
         events = accumulator.Scalars("charts/episodic_return")
-        variant = variant_id(run_args)
+        fields = configuration_fields(ckpt)
+        config = (ckpt["env_id"], fields["variant"], fields["config"], fields["train_guidance"], fields["cond_dropout"])
         steps, returns = np.array([e.step for e in events]), np.array([e.value for e in events])
-        runs.append((run_args, variant, steps, returns, args_file.parent))
-    if not runs:
+        found.append((config, run_args["seed"], steps, returns, run_dir))
+    if not found:
         why = f": {'; '.join(f'{run_dir}: {why}' for _, run_dir, why in left_out)}" if left_out else ""
         raise InputError(f"no TensorBoard episodic returns under {', '.join(run_paths)} of a whole run{why}")
-    siblings = defaultdict(list)
-    for run_args, variant, *_ in runs:
-        siblings[(run_args["env_id"], variant)].append(run_args)
-    curves = defaultdict(list)  # (env, variant, config label) -> [(steps, returns)] per seed
-    seen = {}  # (env, variant, config label, seed) -> run directory: one seed is one run
-    for run_args, variant, steps, returns, run_dir in runs:
-        label = run_config(run_args, siblings[(run_args["env_id"], variant)])
-        first = seen.setdefault((run_args["env_id"], variant, label, run_args["seed"]), run_dir)
+    sources = defaultdict(set)
+    for config, _, _, _, run_dir in found:
+        sources[config].add(str(run_dir.parent))
+    labels = config_labels((*config, frozenset(folders)) for config, folders in sources.items())
+    curves = defaultdict(list)  # (env, variant, series) -> [(steps, returns)] per seed
+    seen = {}  # (configuration, seed) -> run directory: one seed is one run
+    for config, seed, steps, returns, run_dir in found:
+        first = seen.setdefault((config, seed), run_dir)
         if first != run_dir:
-            raise InputError(f"two runs of one configuration and seed {run_args['seed']}: {first} and {run_dir} "
-                             "(e.g. runs of two roots or MuJoCo versions); plot them apart")  # fmt: skip
-        curves[(run_args["env_id"], variant, label)].append((steps, returns))
+            raise InputError(f"two runs of one configuration and seed {seed}: {first} and {run_dir} "
+                             "(e.g. runs of two roots); plot them apart")  # fmt: skip
+        curves[(config[0], config[1], labels[config])].append((steps, returns))
     return curves, left_out
 
 

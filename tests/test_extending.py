@@ -21,6 +21,7 @@ from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, trai
 from torch import nn
 
 import eval_gamma_sweep as sweep
+import plot_results
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import fast, files, identity, paper, runs, scripts
@@ -582,6 +583,10 @@ def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_u
     assert len(set(configs.values())) == 3
     summary = files.read_csv(tmp_path / "sweep" / "summary.csv")
     assert {row["n_seeds"] for row in summary} == {"1"} and len(summary) == 6
+    # The tables and the learning curves keep the same three configurations apart, under one set of names.
+    series = {row["series"] for row in plot_results.summarise(plot_results.read_episodes([str(tmp_path / "sweep")]))}
+    curves, left_out = plot_results.training_curves([str(tmp_path / "runs")])
+    assert not left_out and {label for _, _, label in curves} == series and len(series) == 3
 
 
 def test_an_edited_script_or_task_is_evaluated_again_never_read_from_the_cache(tmp_path, monkeypatch):

@@ -1,10 +1,12 @@
 import csv
 import itertools
+import json
 import math
 import os
 import re
 import subprocess
 import sys
+from pathlib import Path
 
 import matplotlib
 import numpy as np
@@ -631,9 +633,9 @@ def test_learning_curves_draw_few_points_and_say_so(sweep_dir, tmp_path):
     for seed in (1, 2):
         run = tmp_path / "runs" / f"CartPole-v1__pgg_g1.1__s{seed}"
         run.mkdir(parents=True)
-        (run / "args.json").write_text(
-            f'{{"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": {seed}}}'
-        )
+        args = {"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": seed}
+        (run / "args.json").write_text(json.dumps(args))
+        write_checkpoint(run, args, 1024)
         writer = SummaryWriter(str(run))
         for step, value in ((512, 20.0 + seed), (1024, 40.0 + seed)):  # episodes logged at two steps only
             writer.add_scalar("charts/episodic_return", value, step)
@@ -761,7 +763,9 @@ def test_learning_curves_never_count_one_seed_twice(tmp_path):
     for root in ("a", "b"):
         run = tmp_path / root / "CartPole-v1__ppo_pgg__g1__p0__s1"
         run.mkdir(parents=True)
-        (run / "args.json").write_text('{"env_id": "CartPole-v1", "guidance": 1.0, "cond_dropout": 0.0, "seed": 1}')
+        args = {"env_id": "CartPole-v1", "guidance": 1.0, "cond_dropout": 0.0, "seed": 1}
+        (run / "args.json").write_text(json.dumps(args))
+        write_checkpoint(run, args, 512)
         writer = SummaryWriter(str(run))
         writer.add_scalar("charts/episodic_return", 20.0, 512)
         writer.close()
@@ -774,7 +778,9 @@ def test_runs_without_episodic_returns_are_one_error_naming_where(tmp_path):
 
     run = tmp_path / "runs" / "CartPole-v1__ppo__s1"
     run.mkdir(parents=True)
-    (run / "args.json").write_text('{"env_id": "CartPole-v1", "guidance": 1.0, "cond_dropout": 0.0, "seed": 1}')
+    args = {"env_id": "CartPole-v1", "guidance": 1.0, "cond_dropout": 0.0, "seed": 1}
+    (run / "args.json").write_text(json.dumps(args))
+    write_checkpoint(run, args, 512)
     writer = SummaryWriter(str(run))
     writer.add_scalar("losses/value_loss", 1.0, 512)  # a run that logged no episode
     writer.close()
@@ -970,15 +976,25 @@ def test_a_second_writer_into_one_output_folder_is_refused(sweep_dir, tmp_path):
     assert run_cli(sweep_dir, "--output", out).returncode == 0  # the lock free
 
 
+def write_checkpoint(run: Path, args: dict, step: int) -> None:
+    """A minimal readable checkpoint of a run's `args` at `step`: what the learning curves read of a run."""
+    import torch
+
+    ckpt = {"format_version": 2, "script": "ppo_pgg_discrete", "action_space": "discrete", "env_id": args["env_id"],
+            "step_mark": step, "global_step": step, "args": args, "model": {}}  # fmt: skip
+    (run / "checkpoints").mkdir(parents=True, exist_ok=True)
+    torch.save(ckpt, run / "checkpoints" / f"step_{step:09d}.pt")
+
+
 def write_run(root, name: str, seed: int, events_end: int, total: int = 4096, checkpoints=()) -> None:
     from torch.utils.tensorboard import SummaryWriter
 
     run = root / name
     (run / "checkpoints").mkdir(parents=True)
-    (run / "args.json").write_text(f'{{"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": {seed}, '
-                                   f'"total_timesteps": {total}}}')  # fmt: skip
+    args = {"env_id": "CartPole-v1", "guidance": 1.1, "cond_dropout": 0.0, "seed": seed, "total_timesteps": total}
+    (run / "args.json").write_text(json.dumps(args))
     for step in checkpoints:
-        (run / "checkpoints" / f"step_{step:09d}.pt").write_bytes(b"")
+        write_checkpoint(run, args, step)
     writer = SummaryWriter(str(run))
     for step in range(512, events_end + 1, 512):
         writer.add_scalar("charts/episodic_return", 20.0 + seed, step)
