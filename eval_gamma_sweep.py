@@ -86,10 +86,9 @@ from pgg_utils.files import (
     write_record,
 )
 from pgg_utils.identity import configuration, configuration_fields
+from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
-from pgg_utils.seeds import cell_of, check_one_run_per_seed
-from pgg_utils.stats import mean_ci95
 from pgg_utils.video import labelled, write_video
 
 SUMMARY_COLUMNS = [

@@ -3,10 +3,10 @@
     python plot_results.py sweeps/discrete --runs runs/discrete --compare-paper --output results/discrete
 
 Reads the episodes.csv of one or more sweeps (eval_gamma_sweep.py) and, with --runs, the runs'
-TensorBoard events. Every statistic is the one of pgg_utils.stats.mean_ci95: per training seed the
+TensorBoard events. Every statistic is the one of paper_study.stats.mean_ci95: per training seed the
 mean return over the evaluation episodes, then across seeds the mean and a Student-t 95% confidence
 interval. Tables and figures show the same numbers. The report against the paper and CleanRL is
-pgg_utils.agreement's; the figures are drawn by pgg_utils.figures.
+paper_study.agreement's; the figures are drawn by paper_study.figures.
 
 Configurations are never pooled. A sweep's `config` column names the training configuration (the
 variant followed by the training arguments that differ from the defaults, e.g. `ppo mujoco=2.3.7`);
@@ -73,13 +73,13 @@ from pathlib import Path
 
 import matplotlib
 
-matplotlib.use("Agg")  # files only, never a display; before pgg_utils.figures imports pyplot
+matplotlib.use("Agg")  # files only, never a display; before paper_study.figures imports pyplot
 import numpy as np
 import tyro
 from scipy import stats
 
-from pgg_utils import figures, files
-from pgg_utils.agreement import (
+from paper_study import figures
+from paper_study.agreement import (
     REFERENCE_MUJOCO,
     compare_with_paper,
     comparison_markdown,
@@ -89,7 +89,9 @@ from pgg_utils.agreement import (
     step_label,
     task_summaries,
 )
-from pgg_utils.figures import cell_index, ordered_series
+from paper_study.figures import cell_index, ordered_series
+from paper_study.paper import PAPER_ENVS, action_kind, paper_name, variant_rank
+from pgg_utils import files
 from pgg_utils.files import (
     MANIFEST,
     InputError,
@@ -103,9 +105,7 @@ from pgg_utils.files import (
     write_manifest,
 )
 from pgg_utils.identity import configuration, configuration_fields, is_mujoco
-from pgg_utils.paper import PAPER_ENVS, action_kind, paper_name, variant_rank
-from pgg_utils.seeds import cell_of, check_one_run_per_seed
-from pgg_utils.stats import mean_ci95
+from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
 
 ROOT = Path(__file__).resolve().parent
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
@@ -125,7 +125,7 @@ class Args:
     runs: tuple[str, ...] = ()
     """run directories or roots whose TensorBoard events give the learning curves"""
     compare_paper: bool = False
-    """test our cells against the paper's published numbers (data/paper_results.csv) and CleanRL's PPO"""
+    """test our cells against the paper's published numbers (paper_study/data/paper_results.csv) and CleanRL's PPO"""
     provenance: str | None = None
     """CSV naming, for each input CSV, the commits, MuJoCo version and machine behind it (results/provenance.csv)"""
     response_step: int | None = None
@@ -256,7 +256,7 @@ def check_values(row: dict, where: str) -> None:
 
 def kind_of(row: dict, path: Path) -> str:
     """The table a row belongs to, discrete or continuous: the action space its sweep recorded, else
-    the task's own (pgg_utils.paper.action_kind), never a guess from the env's name."""
+    the task's own (paper_study.paper.action_kind), never a guess from the env's name."""
     recorded = row.get("action_space")
     if recorded:
         if recorded not in KINDS:

@@ -40,7 +40,8 @@ import tyro
 
 import eval_gamma_sweep
 import plot_results
-from pgg_utils import paper, processes, runs, scripts
+from paper_study import paper
+from pgg_utils import processes, runs, scripts
 from pgg_utils.arguments import env_id_in_path, guidance_error
 from pgg_utils.files import (
     RECORD,

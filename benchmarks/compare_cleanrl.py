@@ -48,10 +48,10 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+from paper_study.paper import action_kind
+from paper_study.stats import ALPHA, welch
 from pgg_utils.files import write_atomic
-from pgg_utils.paper import action_kind
 from pgg_utils.processes import die_with_parent
-from pgg_utils.stats import ALPHA, welch
 
 IMPLS = ("ours", "cleanrl")
 BINS = 50  # learning-curve bins over the common step range
@@ -369,7 +369,7 @@ def mean_ci(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def welch_p(ours: np.ndarray, cleanrl: np.ndarray) -> float:
-    """Welch's t-test p-value over seeds (pgg_utils.stats.welch: 1 or 0 where neither side varies, e.g.
+    """Welch's t-test p-value over seeds (paper_study.stats.welch: 1 or 0 where neither side varies, e.g.
     every CartPole seed at 500 at the end); NaN with fewer than two seeds on a side."""
     if min(len(ours), len(cleanrl)) < 2:
         return np.nan

@@ -13,6 +13,7 @@ import ppo_pgg_discrete as pgg
 from pgg_utils import runs
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "paper_study"))
 import itertools
 
 import bench_speed

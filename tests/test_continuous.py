@@ -11,9 +11,9 @@ from conftest import ROOT, assert_minibatch_loss_is_cleanrls, small_args, train
 from torch.distributions import Normal
 
 import ppo_pgg_continuous as pgg
+from paper_study.paper import PAPER_ENVS
 from pgg_utils import runs
 from pgg_utils.guidance import uses_null_branch
-from pgg_utils.paper import PAPER_ENVS
 
 PAPER_TASKS = PAPER_ENVS["continuous"]
 

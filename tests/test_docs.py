@@ -48,10 +48,10 @@ def test_the_link_check_sees_a_broken_link_and_a_missing_anchor(tmp_path):
 
 
 def test_readme_shows_the_glance_table_as_the_script_prints_it():
-    printed = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "results_at_a_glance.py")], capture_output=True,
+    printed = subprocess.run([sys.executable, str(ROOT / "paper_study" / "results_at_a_glance.py")], capture_output=True,
                              text=True, check=True, timeout=120).stdout  # fmt: skip
     readme = (ROOT / "README.md").read_text()
-    shown = readme.split("<!-- glance: python benchmarks/results_at_a_glance.py -->\n")[1].split("<!-- /glance -->")[0]
+    shown = readme.split("<!-- glance: python paper_study/results_at_a_glance.py -->\n")[1].split("<!-- /glance -->")[0]
     assert shown == printed
     assert printed.count("\n") == 2 + 8  # a row per task of the paper's two tables
 
@@ -134,7 +134,7 @@ def test_the_readmes_beyond_the_paper_numbers_are_the_roundings_of_the_reports_v
     """Each number in the README's "Beyond the paper" section is the correct rounding of the unrounded value
     (results/beyond/report_values.csv) it quotes, named in BEYOND_SOURCES: a report regenerated with other
     figures, a number rounded twice (from report.md's text) or quoted from the wrong cell fails here."""
-    from pgg_utils.paper import BEYOND_VARIANTS, paper_name
+    from paper_study.paper import BEYOND_VARIANTS, paper_name
 
     with open(ROOT / "results" / "beyond" / "report_values.csv", newline="") as f:
         rows = list(csv.DictReader(f))

@@ -4,7 +4,10 @@
 import ast
 import dataclasses
 import io
+import os
 import re
+import shutil
+import subprocess
 import sys
 import tokenize
 from collections import defaultdict
@@ -24,7 +27,8 @@ import eval_gamma_sweep as sweep
 import plot_results
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import fast, files, identity, paper, runs, scripts
+from paper_study import paper
+from pgg_utils import fast, files, identity, runs, scripts
 from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
 from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
 from pgg_utils.identity import FROZEN_DEFAULTS, GOAL_DIMS
@@ -643,3 +647,67 @@ def test_a_custom_tasks_edit_is_evaluated_again(tmp_path, monkeypatch):
     gym.registry.pop("ForkDrift-v0")
     again = sweep_rows(tmp_path, "sweep")
     assert [-float(r["return"]) for r in again] == [float(r["return"]) for r in first]
+
+
+# --- training stands apart from the paper study ---------------------------------------------------
+
+# Runs a script with the paper study unimportable: an import of it is an ImportError naming it.
+WITHOUT_THE_PAPER_STUDY = """
+import runpy, sys
+class PaperStudy:
+    def find_spec(self, name, path=None, target=None):
+        if name.split(".")[0] in {"paper_study", "plot_results", "reproduce", "matplotlib"}:
+            raise ImportError(f"{name} belongs to the paper study")
+sys.meta_path.insert(0, PaperStudy())
+sys.argv = sys.argv[1:]
+if sys.argv[0] == "-c":
+    exec(sys.argv[1])
+else:
+    runpy.run_path(sys.argv[0], run_name="__main__")
+"""
+
+
+def test_training_the_sweep_and_act_work_in_a_copy_without_the_paper_study(tmp_path):
+    core = tmp_path / "core"
+    shutil.copytree(ROOT / "pgg_utils", core / "pgg_utils", ignore=shutil.ignore_patterns("__pycache__"))
+    for script in ("ppo_pgg_discrete.py", "eval_gamma_sweep.py"):
+        shutil.copy(ROOT / script, core / script)
+    (core / "run.py").write_text(WITHOUT_THE_PAPER_STUDY)
+
+    def run(*command: str) -> str:
+        proc = subprocess.run([sys.executable, "run.py", *command], cwd=core, capture_output=True, text=True,
+                              timeout=300)  # fmt: skip
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return proc.stdout
+
+    run("ppo_pgg_discrete.py", "--guidance", "1.1", "--total-timesteps", "512", "--num-steps", "64",
+        "--checkpoint-interval", "512", "--output-dir", "runs", "--run-name", "cartpole")  # fmt: skip
+    run("eval_gamma_sweep.py", "runs", "--gammas", "1", "2", "--episodes", "2", "--output", "sweep")
+    assert len(files.read_csv(core / "sweep" / "episodes.csv")) == 4
+    (evaluated,) = files.read_csv(core / "sweep" / "evaluated_by.csv")
+    assert evaluated["evaluated_by"] == "ppo_pgg_discrete.py" and evaluated["same_script"] == "yes"
+    acted = run("-c", "import numpy as np; from ppo_pgg_discrete import load_checkpoint; "
+                "agent, _ = load_checkpoint('runs/cartpole/checkpoints/step_000000512.pt'); "
+                "print(agent.act(np.zeros(4), guidance=1.5, deterministic=True))")  # fmt: skip
+    assert acted.strip() in ("0", "1")
+
+
+def test_a_script_copied_outside_the_repository_trains_with_the_installed_project_and_sweeps_with_itself(tmp_path):
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    shutil.copy(ROOT / "ppo_pgg_discrete.py", outside / "my_ppo.py")
+    environment = {key: value for key, value in os.environ.items() if key != "PYTHONPATH"}  # the installed project
+    train = subprocess.run([sys.executable, "my_ppo.py", "--total-timesteps", "512", "--num-steps", "64",
+                            "--checkpoint-interval", "512", "--run-name", "mine"], cwd=outside, env=environment,
+                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert train.returncode == 0, train.stderr[-3000:]
+    sweep_command = [sys.executable, str(ROOT / "eval_gamma_sweep.py"), "runs", "--gammas", "1", "--episodes", "2"]
+    refused = subprocess.run([*sweep_command, "--output", "refused"], cwd=outside, capture_output=True, text=True,
+                             timeout=300)  # fmt: skip
+    assert refused.returncode == 2 and f"pass --script {outside / 'my_ppo.py'}" in refused.stderr
+    swept = subprocess.run([*sweep_command, "--output", "swept", "--script", "my_ppo.py"], cwd=outside,
+                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert swept.returncode == 0, swept.stderr[-3000:]
+    (evaluated,) = files.read_csv(outside / "swept" / "evaluated_by.csv")
+    assert evaluated["evaluated_by"] == str(outside / "my_ppo.py") and evaluated["same_script"] == "yes"
+    assert f"script={outside / 'my_ppo.py'}" in files.read_csv(outside / "swept" / "summary.csv")[0]["config"]

@@ -21,7 +21,8 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import files, identity, runs, stats
+from paper_study import stats
+from pgg_utils import files, identity, runs
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 FORMAT_1 = FIXTURES / "cartpole_format1" / "checkpoints" / "step_000000512.pt"

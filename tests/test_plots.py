@@ -15,10 +15,9 @@ from conftest import ROOT
 from scipy import stats
 
 import plot_results as plots
-from pgg_utils import figures, paper
-from pgg_utils.figures import PAPER_DROPOUT_FIGURE_YLIM
-from pgg_utils.files import LOCK_FILE, lock_directory, read_csv, write_record
-from pgg_utils.stats import (
+from paper_study import figures, paper
+from paper_study.figures import PAPER_DROPOUT_FIGURE_YLIM
+from paper_study.stats import (
     bootstrap_coverage,
     detectable_gap,
     hedges_g,
@@ -30,6 +29,7 @@ from pgg_utils.stats import (
     welch,
     welch_power,
 )
+from pgg_utils.files import LOCK_FILE, lock_directory, read_csv, write_record
 
 # Per-seed mean returns of the synthetic sweep: (env, variant, step, eval γ) -> three seed means.
 # Two episodes per seed, at mean ± 1. With means m, m+1, m+2 the summary is (m+1) ± t(.975,2)·1/√3 = ± 2.5.
@@ -227,7 +227,7 @@ def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_p
     key = lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))
     assert {key(r) for r in rows} == set(SEED_MEANS)
     paper = {(p["env_id"], p["method"], int(p["step"]), float(p["eval_guidance"])): p
-             for p in read_csv(ROOT / "data" / "paper_results.csv")}  # fmt: skip
+             for p in read_csv(ROOT / "paper_study" / "data" / "paper_results.csv")}  # fmt: skip
     expected_p = []
     for r in rows:
         p = paper[(r["env_id"], "ppo" if r["variant"] == "ppo" else "pgg", int(r["step"]), float(r["eval_guidance"]))]
@@ -554,7 +554,7 @@ def test_one_gamma_and_one_variant_have_one_colour_in_every_figure(tmp_path):
         assert line_style(ppo_fig, f"γ = {gamma:g}") == line_style(pgg_fig, f"γ = {gamma:g}") == expected
     assert len({line_style(pgg_fig, f"γ = {g}")[0] for g in (1, 2, 5)}) == 3
     assert figures.gamma_colour(1.05, "continuous") != figures.gamma_colour(1.0, "continuous")
-    # the paper's colours in its continuous figure (its legend, read in data/read_dropout_figure.py) ...
+    # the paper's colours in its continuous figure (its legend, read in paper_study/data/read_dropout_figure.py) ...
     paper = {1.0: (71, 42, 122), 1.1: (33, 145, 140), 1.2: (176, 221, 47)}
     for gamma, rgb in paper.items():
         ours = np.array(matplotlib.colors.to_rgb(figures.gamma_colour(gamma, "continuous"))) * 255
@@ -789,7 +789,7 @@ def test_runs_without_episodic_returns_are_one_error_naming_where(tmp_path):
 
 
 PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"
-sys.path.insert(0, str(ROOT / "data"))
+sys.path.insert(0, str(ROOT / "paper_study" / "data"))
 import read_dropout_figure as reader
 
 
@@ -801,7 +801,7 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
     # must give those numbers back, to within 1% of each panel's y range.
     out = tmp_path / "readings.csv"
     reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, csv=out))
-    with open(ROOT / "data" / "paper_results.csv") as f:
+    with open(ROOT / "paper_study" / "data" / "paper_results.csv") as f:
         table = {(p["env_id"], int(p["step"])): float(p["mean"]) for p in csv.DictReader(f) if p["method"] == "ppo"}
     with open(out) as f:
         readings = list(csv.DictReader(f))
@@ -816,7 +816,7 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
         )
         checked += 1
     assert checked >= 8
-    with open(ROOT / "data" / "paper_dropout_figure.csv") as f:
+    with open(ROOT / "paper_study" / "data" / "paper_dropout_figure.csv") as f:
         assert list(csv.DictReader(f)) == readings  # the committed readings are this script's
 
 
@@ -842,9 +842,9 @@ def test_dropout_tables_set_our_cells_beside_the_readings(tmp_path):
             f"| +30.0 ± 24.8 | {paired:.3f} ({paired:.3f}) | +65.6 |") in effects  # fmt: skip
 
 
-# --- two sweeps of one grid (benchmarks/compare_sweeps.py) -----------------------------------------
+# --- two sweeps of one grid (paper_study/compare_sweeps.py) -----------------------------------------
 
-sys.path.insert(0, str(ROOT / "benchmarks"))
+sys.path.insert(0, str(ROOT / "paper_study"))
 import compare_sweeps
 
 

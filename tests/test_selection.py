@@ -1,4 +1,4 @@
-"""Held-out selection of the eval γ (pgg_utils.selection, benchmarks/heldout_gamma.py) on synthetic sweeps
+"""Held-out selection of the eval γ (paper_study.selection, paper_study/heldout_gamma.py) on synthetic sweeps
 whose answer is known: where γ changes nothing the fresh gain is 0 and the selection bias is the expected
 maximum of the noise; where one γ is truly better it is selected and keeps its gain on fresh episodes."""
 
@@ -10,8 +10,8 @@ import pytest
 from conftest import one_line_error, run_script
 from scipy import integrate, stats
 
+from paper_study.selection import INCOMPLETE, SELECTED_BASELINE, TESTED, held_out, summary_by_env
 from pgg_utils.files import InputError, read_csv, write_csv_atomic
-from pgg_utils.selection import INCOMPLETE, SELECTED_BASELINE, TESTED, held_out, summary_by_env
 
 GAMMAS = (1.0, 1.05, 1.1, 1.15, 1.2, 1.25, 1.3, 1.5)  # the paper's continuous sweep: 8 values
 SEEDS, EPISODES, SD = 5, 50, 10.0
@@ -112,10 +112,10 @@ def test_overlapping_episode_seeds_are_refused_in_one_line(tmp_path):
     selection = write_sweep(tmp_path / "sel.csv", sweep(rng, [1000], 10_000, episodes=5))
     fresh = write_sweep(tmp_path / "fresh.csv", sweep(rng, [1000], 10_003, episodes=5))
     out = str(tmp_path / "out")
-    line = one_line_error(run_script("benchmarks/heldout_gamma.py", selection, fresh, "--output", out))
+    line = one_line_error(run_script("paper_study/heldout_gamma.py", selection, fresh, "--output", out))
     assert line == ("error: 2 episode seeds (10003–10004) of run CartPole-v1__pgg_g1.1__s1 at step 1000 are in both "
                     "sweeps; sweep the fresh episodes with another --eval-seed (e.g. 20000)")  # fmt: skip
-    line = one_line_error(run_script("benchmarks/heldout_gamma.py", selection, selection, "--output", out))
+    line = one_line_error(run_script("paper_study/heldout_gamma.py", selection, selection, "--output", out))
     assert line.startswith("error: 5 episode seeds (10000–10004)")
     assert not Path(out).exists()
 
@@ -131,7 +131,7 @@ def test_groups_the_fresh_sweep_lacks_are_reported_not_dropped(tmp_path):
     fresh = [r for r in sweep(rng, [1000, 2000, 3000, 4000], 20_000, better, episodes=5)
              if r["step"] != 2000 and (r["step"], r["eval_guidance"], r["seed"]) not in gaps]  # fmt: skip
     out = tmp_path / "out"
-    proc = run_script("benchmarks/heldout_gamma.py", write_sweep(tmp_path / "sel.csv", selection),
+    proc = run_script("paper_study/heldout_gamma.py", write_sweep(tmp_path / "sel.csv", selection),
                       write_sweep(tmp_path / "fresh.csv", fresh), "--output", str(out))  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == [str(out / "heldout_gamma.csv"), str(out / "heldout_gamma.md")]

@@ -1,10 +1,10 @@
 """The best eval γ, chosen on one sweep's episodes and reported on another's. `best_gamma` (plot_results)
 picks the γ with the highest mean and reports that same mean; over 6–8 γ values and 5 seeds that maximum
 is biased upward even where γ changes nothing. Here the choice and the report use disjoint episodes of
-the same checkpoints (pgg_utils.selection):
+the same checkpoints (paper_study.selection):
 
     python eval_gamma_sweep.py RUNS --eval-seed 20000 --output runs/sweeps/fresh   # needs the checkpoints
-    python benchmarks/heldout_gamma.py results/discrete/episodes.csv runs/sweeps/fresh/episodes.csv \\
+    python paper_study/heldout_gamma.py results/discrete/episodes.csv runs/sweeps/fresh/episodes.csv \\
         --output runs/heldout/discrete
 
 The first sweep selects γ per (env, configuration, step); the second, swept from the same run
@@ -17,7 +17,7 @@ dropped. That a seed is the same checkpoint in both is checked by its run name o
 record no checkpoint digest, so sweep both from the same, unchanged run directories.
 
 Writes into --output, atomically, and prints each path:
-  heldout_gamma.csv   one row per group (pgg_utils.selection.GROUP_COLUMNS)
+  heldout_gamma.csv   one row per group (paper_study.selection.GROUP_COLUMNS)
   heldout_gamma.md    per env and variant the counts and medians, then the per-group table
 """
 
@@ -30,11 +30,11 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
-from pgg_utils.agreement import fmt, fmt_p, step_label
+from paper_study.agreement import fmt, fmt_p, step_label
+from paper_study.paper import paper_name, variant_rank
+from paper_study.selection import BASELINE_GAMMA, GROUP_COLUMNS, INCOMPLETE, TESTED, held_out, summary_by_env
+from paper_study.stats import ALPHA
 from pgg_utils.files import one_line_errors, write_atomic, write_csv_atomic
-from pgg_utils.paper import paper_name, variant_rank
-from pgg_utils.selection import BASELINE_GAMMA, GROUP_COLUMNS, INCOMPLETE, TESTED, held_out, summary_by_env
-from pgg_utils.stats import ALPHA
 
 
 @dataclass

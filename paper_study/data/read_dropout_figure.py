@@ -9,9 +9,9 @@ The figure's black PPO markers read back the paper's PPO table to within 1% of a
 (tests/test_plots.py). The paler γ markers, blended with the CI bands, cannot be checked that way:
 the paper gives no numbers for them.
 
-    python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
-        --csv data/paper_dropout_figure.csv
-    python data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
+    python paper_study/data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
+        --csv paper_study/data/paper_dropout_figure.csv
+    python paper_study/data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
         --beside results/continuous/fig_continuous_pgg_drop0.1.png \
         --output results/continuous/side_by_side_pgg_drop0.1.png \
         --ours results/continuous/episodes.csv \
@@ -30,11 +30,11 @@ import tyro
 from PIL import Image
 from scipy import stats
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 import plot_results  # from the repository root, added to the path above
-from pgg_utils.agreement import step_label
+from paper_study.agreement import step_label
+from paper_study.stats import holm
 from pgg_utils.files import InputError, write_atomic
-from pgg_utils.stats import holm
 
 FIGURE_SIZE = (2586, 1319)  # the calibration below holds for this rendering of the figure only
 # (line, eval γ) -> marker colour: the dropout model's lines in the legend's viridis, and the paper's PPO

@@ -18,9 +18,9 @@ import matplotlib.pyplot as plt
 import matplotlib.ticker
 import numpy as np
 
-from pgg_utils.agreement import other_mujoco, step_label
-from pgg_utils.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank
-from pgg_utils.stats import mean_ci95
+from paper_study.agreement import other_mujoco, step_label
+from paper_study.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank
+from pgg_utils.pooling import mean_ci95
 
 # The possible return of a task, where it has one: axes never extend past it.
 RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
@@ -40,7 +40,7 @@ GAMMA_CMAP, GAMMA_CMAP_SPAN = (
 PAPER_FIGURE_GAMMAS = {"discrete": PAPER_GAMMAS["discrete"], "continuous": (1.0, 1.05, 1.1, 1.15, 1.2)}
 BEYOND_FIGURE_CMAP, BEYOND_FIGURE_SPAN = "plasma", (0.3, 0.55)
 # The y-limits of the paper's continuous dropout figure's panels (read off its axes with the calibration
-# of data/read_dropout_figure.py): our figure beside it uses them, widened where our means need it.
+# of paper_study/data/read_dropout_figure.py): our figure beside it uses them, widened where our means need it.
 PAPER_DROPOUT_FIGURE_YLIM = {"HalfCheetah-v4": (657.0, 2182.0), "Hopper-v4": (908.0, 3162.0),
                              "Humanoid-v4": (403.0, 731.0), "InvertedPendulum-v4": (691.0, 1034.0),
                              "Pusher-v4": (-104.0, -31.0), "Walker2d-v4": (170.0, 3637.0)}  # fmt: skip

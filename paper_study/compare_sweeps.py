@@ -1,7 +1,7 @@
 """Two sweeps of one grid, cell by cell: the same configurations trained on two software stacks
 (MuJoCo versions, machines) or at two code revisions. It is the cross-stack check of the results:
 
-    python benchmarks/compare_sweeps.py results/continuous/episodes.csv \\
+    python paper_study/compare_sweeps.py results/continuous/episodes.csv \\
         results/continuous_device/episodes.csv --labels "MuJoCo 2.3.7 (table)" "MuJoCo 3.1.6" \\
         --output results/continuous_device/compare_table.md
 
@@ -23,10 +23,10 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import plot_results as plots
-from pgg_utils.agreement import compare_row, fmt, fmt_p, p_is, step_label
+from paper_study.agreement import compare_row, fmt, fmt_p, p_is, step_label
+from paper_study.paper import paper_name, variant_rank
+from paper_study.stats import ALPHA, correct_family, sign_test
 from pgg_utils.files import InputError, one_line_errors, write_atomic
-from pgg_utils.paper import paper_name, variant_rank
-from pgg_utils.stats import ALPHA, correct_family, sign_test
 
 
 @dataclass

@@ -17,9 +17,10 @@ from collections import defaultdict
 import numpy as np
 from scipy import stats
 
+from paper_study.stats import correct_family
 from pgg_utils.files import InputError
 from pgg_utils.identity import configuration
-from pgg_utils.stats import correct_family, mean_ci95
+from pgg_utils.pooling import mean_ci95
 
 BASELINE_GAMMA = 1.0  # no guidance: what a selected γ has to beat
 GROUP_FIELDS = ("env_id", "variant", "config", "train_guidance", "cond_dropout", "step")
@@ -88,7 +89,7 @@ def select_gamma(cells: dict, seeds: list[int]) -> float:
 
 def paired_t(differences: np.ndarray) -> tuple[float, float]:
     """(t, two-sided p) of the paired t test that the mean difference is 0, on n − 1 degrees of freedom.
-    With no spread the difference is certain: p = 1 if it is 0, else 0 (as pgg_utils.stats.welch)."""
+    With no spread the difference is certain: p = 1 if it is 0, else 0 (as paper_study.stats.welch)."""
     n = len(differences)
     if n < 2:
         return math.nan, math.nan

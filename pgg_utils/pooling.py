@@ -1,5 +1,11 @@
-"""The rule behind every statistic over seeds, once: within one configuration a seed is one run, and
-each episode of a cell is counted once."""
+"""Pooling over seeds, once: the rule behind every statistic over seeds (within one configuration a seed
+is one run, and each episode of a cell is counted once) and the statistic itself, the mean over seeds
+and its 95% confidence interval."""
+
+import math
+
+import numpy as np
+from scipy import stats
 
 from pgg_utils.files import InputError
 
@@ -32,3 +38,20 @@ def check_one_run_per_seed(rows, configuration, cell, source=lambda row: None) -
             raise InputError(f"episode {row['episode']} of run {run} ({' '.join(map(str, cell(row)))}) appears {twice}: "
                              "pass each sweep once")  # fmt: skip
         seen[episode] = where
+
+
+def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tuple[float, float, float, float]:
+    """(mean, half-width, low, high) of the 95% confidence interval of the mean of `values` (here:
+    one mean return per training seed). "t": mean ± t_{0.975, n-1} · s / sqrt(n), s the sample standard
+    deviation (ddof=1). "bootstrap": percentile interval of `bootstrap_samples` resampled means (fixed
+    RNG seed), half-width = (high - low) / 2. With one value the interval is undefined (nan)."""
+    values = np.asarray(values, dtype=np.float64)
+    n, mean = len(values), float(np.mean(values))
+    if n < 2:
+        return mean, math.nan, math.nan, math.nan
+    if method == "t":
+        half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
+        return mean, half, mean - half, mean + half
+    resampled = np.random.default_rng(0).choice(values, size=(bootstrap_samples, n)).mean(1)
+    low, high = np.percentile(resampled, [2.5, 97.5])
+    return mean, float((high - low) / 2), float(low), float(high)

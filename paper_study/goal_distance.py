@@ -1,7 +1,7 @@
 """How close guidance brings the fingertip (Reacher-v4) or the object (Pusher-v4) to its goal: the final
-distance of every episode against the eval γ, for "Beyond the paper" (benchmarks/beyond_report.py).
+distance of every episode against the eval γ, for "Beyond the paper" (paper_study/beyond_report.py).
 
-    python benchmarks/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
+    python paper_study/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
         results/continuous/agents --envs Reacher-v4 Pusher-v4 --steps 1000000 --output results/beyond/goal_distance.csv
 
 Each (checkpoint, γ) plays the episodes of a sweep cell (reset seed eval_seed + k, the sweep's action
@@ -20,10 +20,10 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
+from paper_study.paper import PAPER_GAMMAS
 from pgg_utils import runs
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
 from pgg_utils.identity import variant_id
-from pgg_utils.paper import PAPER_GAMMAS
 
 FINAL_DISTANCE = {
     "Reacher-v4": lambda obs: float(np.linalg.norm(obs[8:11])),

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from pgg_utils.paper import PAPER_SEEDS, paper_rows
-from pgg_utils.stats import (
+from paper_study.paper import PAPER_SEEDS, paper_rows
+from paper_study.stats import (
     ALPHA,
     POWER,
     bootstrap_coverage,
@@ -27,7 +27,7 @@ from pgg_utils.stats import (
     welch,
 )
 
-PAPER_DATA = Path(__file__).resolve().parent.parent / "data" / "paper_results.csv"
+PAPER_DATA = Path(__file__).resolve().parent / "data" / "paper_results.csv"
 REFERENCE_MUJOCO = "2.3.7"  # the physics the v4 tasks were written for; cells from other versions are marked
 # CleanRL's published PPO benchmark (docs.cleanrl.dev, rl-algorithms/ppo: ppo.py on classic control,
 # ppo_continuous_action.py on MuJoCo v4, tag pr-424). Its protocol: per run the mean of the last 100
@@ -336,13 +336,13 @@ def comparison_markdown(rows: list[dict], summary: list[dict], tasks: list[dict]
                      "below (per cell from its two seed sds; the median over a task's cells).")  # fmt: skip
         lines += ["", *headline_table(of_kind), ""]
         lines.append(f"The gap detected {100 * POWER:.0f}% of the time: the exact power of Welch's test for normal "
-                     "samples, the cell's two sds taken as the true ones (`pgg_utils.stats.detectable_gap`). Cells "
+                     "samples, the cell's two sds taken as the true ones (`paper_study.stats.detectable_gap`). Cells "
                      "with no spread on either side (both at the task's ceiling), where the test is degenerate and "
                      "no gap is possible, are left out of both columns. The relative gap: per cell "
                      "(ours − paper) / |paper|, the median over the task's cells; its interval resamples our "
                      "seeds (every resample enumerated and weighted, so its endpoints are exact, not a Monte Carlo "
                      f"draw; {BOOTSTRAP_RESAMPLES:,} draws, RNG seed 0, where there are too many: "
-                     "`pgg_utils.stats.median_relative_gap`), one draw of seeds per run set so that a "
+                     "`paper_study.stats.median_relative_gap`), one draw of seeds per run set so that a "
                      "run's checkpoints and eval γ move together, and **holds the paper's means fixed**: it is our "
                      "seeds' uncertainty, not the paper's, and says how far ours lies from the published numbers, "
                      "not from the distribution they were drawn from. With 5 seeds a percentile bootstrap is narrow: "

@@ -29,7 +29,7 @@ BEYOND_VARIANTS = {
 }  # fmt: skip
 
 
-# Our variant -> the paper's (method, training guidance) in data/paper_results.csv: the rows of the
+# Our variant -> the paper's (method, training guidance) in paper_study/data/paper_results.csv: the rows of the
 # paper's tables a run of that variant is compared with. Any other variant is compared with none.
 PAPER_ROWS_OF_VARIANT = {"ppo": ("ppo", ""), "pgg_g1.1": ("pgg", "1.1")}
 

@@ -1,6 +1,7 @@
-"""The statistics every report uses, once: the confidence interval over seeds, Welch's test from summary
-statistics, effect sizes, Holm's correction and the sign test; the power of Welch's test and the gap it
-detects; a bootstrap over seeds of a pooled relative gap. Numpy and scipy; no torch."""
+"""The statistics the paper study's reports use, once: Welch's test from summary statistics, effect sizes,
+Holm's correction and the sign test; the power of Welch's test and the gap it detects; a bootstrap over
+seeds of a pooled relative gap. The confidence interval over seeds is the sweep's (pgg_utils.pooling).
+Numpy and scipy; no torch."""
 
 import functools
 import itertools
@@ -8,24 +9,6 @@ import math
 
 import numpy as np
 from scipy import optimize, stats
-
-
-def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tuple[float, float, float, float]:
-    """(mean, half-width, low, high) of the 95% confidence interval of the mean of `values` (here:
-    one mean return per training seed). "t": mean ± t_{0.975, n-1} · s / sqrt(n), s the sample standard
-    deviation (ddof=1). "bootstrap": percentile interval of `bootstrap_samples` resampled means (fixed
-    RNG seed), half-width = (high - low) / 2. With one value the interval is undefined (nan)."""
-    values = np.asarray(values, dtype=np.float64)
-    n, mean = len(values), float(np.mean(values))
-    if n < 2:
-        return mean, math.nan, math.nan, math.nan
-    if method == "t":
-        half = float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
-        return mean, half, mean - half, mean + half
-    resampled = np.random.default_rng(0).choice(values, size=(bootstrap_samples, n)).mean(1)
-    low, high = np.percentile(resampled, [2.5, 97.5])
-    return mean, float((high - low) / 2), float(low), float(high)
-
 
 ALPHA = 0.05  # the significance level of every test in the reports, family-wise after Holm
 
