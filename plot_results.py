@@ -110,7 +110,8 @@ from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
 ROOT = Path(__file__).resolve().parent
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
                     "null_branch", "seed", "return"}  # fmt: skip
-KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
+KINDS = ("discrete", "continuous")
+NULL_BRANCHES = ("learned", "uniform", "bc")  # the sweep's null_branch column  # the paper's two tables, by action space
 # The eval γ a paper figure draws where it is fewer than its table's (its continuous dropout figure: 1.0-1.2).
 # Our figure of that variant draws the same range; the other swept γ go to fig_<kind>_<variant>_beyond_paper.
 PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}
@@ -133,7 +134,7 @@ class Args:
     policy: str = "sample"
     """which evaluation policy to report: sample or deterministic"""
     null_branch: str = "learned"
-    """which unconditional branch to report: learned or uniform (the temperature-scaling control)"""
+    """which unconditional branch to report: learned, uniform (the temperature-scaling control) or bc (fitted by pgg_utils.bc_null)"""
 
 
 USAGE = ("usage: plot_results.py SWEEP [SWEEP ...] [--output DIR] [--runs RUN ...] [--compare-paper] "
@@ -173,8 +174,8 @@ def validate(args: Args) -> None:
         raise InputError(f"--provenance: no such file: {args.provenance}")
     if args.policy not in ("sample", "deterministic"):
         raise InputError(f"--policy must be sample or deterministic, not {args.policy!r}")
-    if args.null_branch not in ("learned", "uniform"):
-        raise InputError(f"--null-branch must be learned or uniform, not {args.null_branch!r}")
+    if args.null_branch not in NULL_BRANCHES:
+        raise InputError(f"--null-branch must be one of {', '.join(NULL_BRANCHES)}, not {args.null_branch!r}")
     if args.response_step is not None and args.response_step <= 0:
         raise InputError(f"--response-step must be a positive step, not {args.response_step}")
     check_writable(Path(args.output))

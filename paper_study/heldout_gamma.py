@@ -48,7 +48,7 @@ class Args:
     policy: str = "sample"
     """the evaluation mode to compare: sampled actions (or `deterministic`, of a --deterministic sweep)"""
     null_branch: str = "learned"
-    """the evaluation mode to compare: the learned null branch (or `uniform`, of a --uniform-null sweep)"""
+    """the evaluation mode to compare: the learned null branch (or `uniform`, of a --uniform-null sweep, or `bc`, of fitted nulls)"""
 
 
 def episodes(path: str, args: Args) -> list[dict]:

@@ -24,3 +24,4 @@ for eval_seed in 10000 20000; do
 done
 cp runs/sweeps/bc_null_10000/episodes.csv "$out/episodes.csv"
 cp runs/sweeps/bc_null_20000/episodes.csv "$out/heldout_fresh.csv"
+python paper_study/heldout_gamma.py "$out/episodes.csv" "$out/heldout_fresh.csv" --null-branch bc --output "$out"
