@@ -39,7 +39,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 import tyro
-from scipy import stats
+from scipy import optimize, stats
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
@@ -47,12 +47,15 @@ import matplotlib.pyplot as plt
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.figures import steps_formatter, variant_colour
-from paper_study.paper import BEYOND_VARIANTS, paper_name, variant_rank
+from paper_study.paper import BEYOND_VARIANTS, PAPER_ENVS, paper_name, variant_rank
 from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, welch
 from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic
 from pgg_utils.pooling import mean_ci95
 
 BASELINES = ("ppo", "pgg_g1.1")
+# The behaviour-cloned nulls of the tables' agents (pgg_utils/bc_null.py, results/beyond/bc_null/run.sh): their
+# folder, and the suffix that keys a fitted null's cells beside the same agents' own null in `means`.
+BC_FOLDER, BC = "bc_null", " null=bc"
 GOAL_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "{goal}" in flags}
 SCHEDULE_VARIANTS = set(BEYOND_VARIANTS) - GOAL_VARIANTS
 COLLAPSE_FRACTION = 0.5
@@ -69,6 +72,10 @@ class Args:
     """the continuous table's episodes, for the baselines of the paper's tasks"""
     table_heldout: str = "results/continuous/heldout_gamma.csv"
     """the continuous table's held-out γ, for the baselines' rows of the held-out table"""
+    discrete_table: str = "results/discrete/episodes.csv"
+    """the discrete table's episodes, for the discrete agents whose null was behaviour-cloned"""
+    discrete_heldout: str = "results/discrete/heldout_gamma.csv"
+    """the discrete table's held-out γ, beside the fitted nulls'"""
     runs: str | None = None
     """the runs' folder, to rewrite guidance_trajectory.csv from their TensorBoard events; None: read the CSV"""
 
@@ -188,7 +195,8 @@ def comparisons(means: dict, env: str, variant: str, baseline: str) -> tuple[lis
 def read_heldout(folder: Path, table_heldout: Path) -> dict:
     """{(env, variant, step): heldout row} from each task's heldout_gamma.csv and the table's."""
     out = {}
-    for path in [*([table_heldout] if table_heldout.exists() else []), *sorted(folder.glob("*/heldout_gamma.csv"))]:
+    tasks = (path for path in sorted(folder.glob("*/heldout_gamma.csv")) if path.parent.name != BC_FOLDER)
+    for path in [*([table_heldout] if table_heldout.exists() else []), *tasks]:
         with open(path, newline="") as f:
             for r in csv.DictReader(f):
                 out[(r["env_id"], r["variant"], int(r["step"]))] = r
@@ -530,12 +538,157 @@ def glance_section(means: dict, variants_of: dict, distance: dict, gamma_one_p: 
     return lines
 
 
-def band(ax, xs, per_x_values, variant: str) -> None:
+def paired_test(ours: list[float], theirs: list[float]) -> dict:
+    """A paired t test of two lists of one set of seeds (the same agents, the same episodes): the mean
+    difference, p, and the difference one test detects with 80% power at α = 0.05 (the noncentral t)."""
+    differences = np.asarray(ours) - np.asarray(theirs)
+    n, sd = len(differences), float(np.std(differences, ddof=1))
+    if sd == 0:
+        return {
+            "difference": float(differences.mean()),
+            "p": 1.0 if differences.mean() == 0 else 0.0,
+            "detectable": 0.0,
+        }
+    critical = stats.t.ppf(1 - ALPHA / 2, n - 1)
+    # The lower tail is below 1e-10 where the power nears 0.8, and scipy's noncentral t returns NaN far out in it.
+    power = lambda gap: stats.nct.sf(critical, n - 1, gap * math.sqrt(n) / sd)
+    detectable = float(optimize.brentq(lambda gap: power(gap) - 0.8, 1e-9 * sd, 10 * sd))  # power 1 at 10 sd
+    return {"difference": float(differences.mean()), "p": float(stats.ttest_rel(ours, theirs).pvalue),
+            "detectable": detectable}  # fmt: skip
+
+
+def read_bc(folder: Path, args: Args) -> tuple[dict, list[tuple[str, str]], dict]:
+    """(means, the (task, variant) of each fitted set, held-out rows) of the behaviour-cloned nulls: the
+    fitted nulls' cells keyed `<variant> null=bc`, beside the same agents' cells with their own null (from
+    the tables, at the fitted checkpoints' step) under the variant itself; held-out rows keyed so too."""
+    path = folder / BC_FOLDER / "episodes.csv"
+    if not path.exists():
+        return {}, [], {}
+    with open(path, newline="") as f:
+        fitted = [r for r in csv.DictReader(f) if r["policy"] == "sample" and r["null_branch"] == "bc"]
+    step_of = {(r["env_id"], r["variant"]): r["step"] for r in fitted}
+    own = [r for table in (args.table, args.discrete_table) if Path(table).exists() for r in read_rows(Path(table))
+           if step_of.get((r["env_id"], r["variant"])) == r["step"]]  # fmt: skip
+    means = seed_means(own + [{**r, "variant": r["variant"] + BC} for r in fitted])
+    heldout = {}
+    for table in (args.table_heldout, args.discrete_heldout, folder / BC_FOLDER / "heldout_gamma.csv"):
+        if Path(table).exists():
+            with open(table, newline="") as f:
+                for r in csv.DictReader(f):
+                    variant = r["variant"] + (BC if "null=bc" in r["config"].split() else "")
+                    if step_of.get((r["env_id"], r["variant"])) == r["step"]:
+                        heldout[(r["env_id"], variant)] = r
+    order = lambda key: (key[0] not in PAPER_ENVS["continuous"], key[0], variant_rank(key[1]))
+    return means, sorted(step_of, key=order), heldout
+
+
+def null_name(variant: str) -> str:
+    """The null branch a set of agents is evaluated with: PPO's is never trained (all zeros)."""
+    if variant.endswith(BC):
+        return "behaviour-cloned"
+    return "zero (untrained)" if variant == "ppo" else "learned"
+
+
+def bc_section(means: dict, sets: list[tuple[str, str]], heldout: dict, values_out: list[dict]) -> list[str]:
+    """Question 3: does a behaviour-cloned unconditional branch make γ a more useful or a more stable knob?"""
+    if not sets:
+        return []
+    lines = ["## Question 3: a behaviour-cloned unconditional branch", "",
+             ("The null embedding of each of the tables' PPO and γ_train 1.1 agents at its last step, fitted by maximum "
+              "likelihood to the actions of 40 of the agent's own episodes at γ = 1 with the rest of the network frozen "
+              "(`pgg_utils/bc_null.py`; results/beyond/bc_null), swept on the tables' episodes. These comparisons "
+              "isolate the unconditional branch: the same agents, the same episodes, another null. At γ = 1 the null "
+              "plays no part, and every γ = 1 cell equals the table's to the bit (the same machine and stack). The "
+              "other comparison the question asks for, a variant that clones the rollout's actions while it trains "
+              "against the constant γ_train 1.1, is not run yet."), "",
+             ("γ-response at the agents' last mark (means over seeds; best γ chosen on these episodes) and the γ chosen "
+              "on these episodes scored on fresh ones (episode seeds 20000+) against γ = 1 there, ± its 95% CI."), "",
+             "| task | agents | null | γ = 1 | best γ: return | largest γ: return | largest vs best | held-out γ: fresh gain |",
+             "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for env, variant in sets:
+        for key in (variant, variant + BC):
+            gammas, values = response_at_last_step(means, env, key)
+            if any(math.isnan(v) for v in values):
+                continue
+            (best, drop), at_one = largest_vs_best(values), values[gammas.index(1.0)]
+            held = heldout.get((env, key))
+            chosen = "–" if held is None else (f"{float(held['selected_gamma']):g}: {float(held['fresh_gain']):+.1f} ± "
+                                               f"{float(held['fresh_gain_ci95'] or 0):.1f}")  # fmt: skip
+            for quantity, value in (("return at γ 1", at_one), ("best γ", gammas[best]), ("return at best γ", values[best]),
+                                    ("largest γ", gammas[-1]), ("return at largest γ", values[-1]),
+                                    ("largest γ vs best (%)", 100 * drop)):  # fmt: skip
+                record(values_out, env, key, "question 3", quantity, value)
+            lines.append(f"| {env} | {paper_name(variant)} | {null_name(key)} | {at_one:.1f} | {gammas[best]:g}: "
+                         f"{values[best]:.1f} | {gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {chosen} |")  # fmt: skip
+    tests = []
+    for env, variant in sets:
+        (best_own, falls_own, returns_own), (best_bc, falls_bc, returns_bc) = (
+            seed_falls(means, env, key) for key in (variant, variant + BC)
+        )
+        if len(falls_own) < 2 or len(falls_own) != len(falls_bc):
+            continue
+        cells_own, cells_bc = cells_of(means, env, variant), cells_of(means, env, variant + BC)
+        common = sorted(c for c in set(cells_own) & set(cells_bc) if c[1] != 1.0)
+        seeds = sorted(set.intersection(*(set(cells_bc[c]) for c in common)))
+        block = np.array([[cells_bc[c][seed] for seed in seeds] for c in common])
+        references = np.array([summary(cells_own[c])[0] for c in common])
+        differences = [summary(cells_bc[c])[0] - summary(cells_own[c])[0] for c in common]
+        tests.append({"env_id": env, "variant": variant, "best": best_own, "best_bc": best_bc,
+                      "fall": paired_test(falls_bc, falls_own), "return": paired_test(returns_bc, returns_own),
+                      "above": sum(d > 0 for d in differences), "below": sum(d < 0 for d in differences),
+                      "cells": len(common), "gap": median_relative_gap([(block, references)])})  # fmt: skip
+    for kind in ("fall", "return"):
+        for test, p_holm in zip(tests, holm([t[kind]["p"] for t in tests])):
+            test[kind]["p_holm"] = p_holm
+    lines += ["", (f"Is γ more stable with the cloned null? Each seed's fall from its side's best γ to the largest, and "
+                   f"its return at that best γ, the cloned null's minus the agent's own, paired by seed (t test; Holm "
+                   f"over the {len(tests)} tests of each kind; the difference one test detects with 80% power at "
+                   "α = 0.05, before Holm). Then every γ ≠ 1 cell: how many lie above and below the own null's, and the "
+                   "median relative gap with its exact bootstrap interval over seeds (the own null's means held "
+                   "fixed)."), "",
+              ("| task | agents | best γ (own null's) | fall difference | p (Holm) | detectable | return difference "
+               "at best γ | p (Holm) | detectable | cells above / below | median gap [95% CI] |"),
+              "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for t in tests:
+        fall, ret = t["fall"], t["return"]
+        for quantity, value in (("fall difference (pts)", 100 * fall["difference"]), ("fall p", fall["p"]),
+                                ("fall p Holm", fall["p_holm"]), ("fall detectable (pts)", 100 * fall["detectable"]),
+                                ("return difference at best γ", ret["difference"]), ("return p", ret["p"]),
+                                ("return p Holm", ret["p_holm"]), ("return detectable", ret["detectable"]),
+                                ("cells above", t["above"]), ("cells below", t["below"]), ("cells", t["cells"]),
+                                ("median gap (%)", 100 * t["gap"][0]), ("median gap low (%)", 100 * t["gap"][1]),
+                                ("median gap high (%)", 100 * t["gap"][2])):  # fmt: skip
+            record(values_out, t["env_id"], t["variant"] + BC, t["variant"], quantity, value)
+        lines.append(f"| {t['env_id']} | {paper_name(t['variant'])} | {t['best_bc']:g} ({t['best']:g}) | "
+                     f"{points(fall['difference'])} | {fmt_p(fall['p'])} ({fmt_p(fall['p_holm'])}) | "
+                     f"{points(fall['detectable'], sign=False)} | {fmt(ret['difference'])} | {fmt_p(ret['p'])} "
+                     f"({fmt_p(ret['p_holm'])}) | {fmt(ret['detectable'])} | {t['above']} / {t['below']} | "
+                     f"{pct(t['gap'][0])} [{pct(t['gap'][1])}, {pct(t['gap'][2])}] |")  # fmt: skip
+    return [*lines, ""]
+
+
+def bc_figure(means: dict, sets: list[tuple[str, str]], path: Path) -> None:
+    """A panel per task: each set of agents' γ-response with its own null (solid) and the cloned one (dashed)."""
+    envs = list(dict.fromkeys(env for env, _ in sets))
+    fig, axes = panels(len(envs), 3.4)
+    for ax, env in zip(axes, envs):
+        for variant in (v for e, v in sets if e == env):
+            for key, style in ((variant, "-"), (variant + BC, "--")):
+                cells, last = cells_of(means, env, key), last_step(means, env)
+                gammas = sorted(g for (s, g) in cells if s == last)
+                band(ax, gammas, [list(cells[(last, g)].values()) for g in gammas], variant,
+                     f"{paper_name(variant)}, {null_name(key)} null", style)  # fmt: skip
+        ax.set(title=f"{env}, {step_label(last_step(means, env))}", xlabel="eval guidance γ", ylabel="return")
+        ax.set_xscale("log" if max(g for (e, v, s, g) in means if e == env) > 2 else "linear")
+    save(fig, axes, path)
+
+
+def band(ax, xs, per_x_values, variant: str, label: str | None = None, linestyle: str = "-") -> None:
     """A variant's mean over seeds against x, with its 95% CI as a band."""
     stats = [mean_ci95(values) for values in per_x_values]
     mean, half = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
     color = variant_colour(variant)
-    ax.plot(xs, mean, marker="o", ms=3, color=color, label=paper_name(variant))
+    ax.plot(xs, mean, marker="o", ms=3, color=color, label=label or paper_name(variant), linestyle=linestyle)
     ax.fill_between(xs, mean - half, mean + half, color=color, alpha=0.15)
 
 
@@ -599,7 +752,7 @@ def distance_figure(distance: dict, variants_of: dict, path: Path) -> None:
 
 def report(args: Args) -> list[Path]:
     folder = Path(args.folder)
-    task_files = sorted(folder.glob("*/episodes.csv"))
+    task_files = sorted(path for path in folder.glob("*/episodes.csv") if path.parent.name != BC_FOLDER)
     if not task_files:
         raise InputError(f"no <task>/episodes.csv under {folder}")
     beyond = [r for path in task_files for r in read_rows(path)]
@@ -639,6 +792,8 @@ def report(args: Args) -> list[Path]:
              "trained here."), "", *glance_section(means, variants_of, distance, [r["p"] for r in rows], values)]  # fmt: skip
     for env in envs:
         lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories, values)
+    bc_means, bc_sets, bc_heldout = read_bc(folder, args)
+    lines += bc_section(bc_means, bc_sets, bc_heldout, values)
     written = [folder / "report.md", folder / "report.csv", folder / "report_values.csv", folder / "gamma_response.png"]
     if trajectories:
         written.append(folder / "guidance_trajectory.png")
@@ -646,6 +801,9 @@ def report(args: Args) -> list[Path]:
     if distance:
         written.append(folder / "goal_distance.png")
         distance_figure(distance, variants_of, written[-1])
+    if bc_sets:
+        written.append(folder / "bc_null_gamma_response.png")
+        bc_figure(bc_means, bc_sets, written[-1])
     write_atomic(written[0], "\n".join(lines))
     write_csv_atomic(written[1], REPORT_COLUMNS, rows)
     write_csv_atomic(written[2], VALUE_COLUMNS, values)

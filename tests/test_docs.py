@@ -90,6 +90,7 @@ def rounds_from(text: str, value: float) -> bool:
 # paper" section, in the order written; None for a label: a number of a variant's name or an eval γ.
 H, W, U, P, R = "Hopper-v4", "Walker2d-v4", "Humanoid-v4", "Pusher-v4", "Reacher-v4"
 LIN, ADA, CON, PPO, GOAL = "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1", "ppo", "pgg_g1.1_goal"
+BC = " null=bc"  # a behaviour-cloned null's rows (paper_study/beyond_report.py)
 FALL = "largest γ vs best (%)"
 BEYOND_SOURCES = [
     (H, LIN, "", "seeds"), None,  # 5 seeds; γ = 1.5
@@ -113,6 +114,11 @@ BEYOND_SOURCES = [
     (R, PPO, "", "seeds farther"), (R, PPO, "", "seeds"), (R, PPO, "", "distance p"),
     (R, GOAL, PPO, "cells above"), (R, GOAL, PPO, "cells"), None, None,  # γ = 1; γ = 1.5
     (P, GOAL, "", "distance largest vs γ 1 (%)"), (P, PPO, "", "distance largest vs γ 1 (%)"),
+    None,  # γ = 1.5
+    (W, PPO + BC, PPO, "fall difference (pts)"), (W, PPO + BC, PPO, "fall p Holm"),
+    (U, PPO + BC, PPO, "fall difference (pts)"), (U, PPO + BC, PPO, "fall p Holm"), None,  # γ_train 1.1
+    (H, CON + BC, CON, "return difference at best γ"), (H, CON + BC, CON, "return p Holm"),
+    (U, CON + BC, CON, "return difference at best γ"), (U, CON + BC, CON, "return p Holm"),
 ]  # fmt: skip
 
 
