@@ -31,14 +31,11 @@ for path in sys.argv[1:]:
         )
         with torch.no_grad():
             if ckpt["action_space"] == "continuous":
-                sigma = fresh.actor_logstd.exp()[0].numpy()
-                fit, target = fresh.actor_mean(null[None])[0].numpy() / sigma, actions.mean(0) / sigma
+                fit = fresh.actor_mean(null[None])[0].numpy() / fresh.actor_logstd.exp()[0].numpy()
             else:
                 fit = torch.softmax(fresh.actor(null[None])[0], -1).numpy()
-                target = np.bincount(actions, minlength=len(fit)) / len(actions)
+        gap = bc_null.reach(fresh, ckpt["action_space"], null, actions)
         fits[n] = fit
-        print(
-            f"  n={n:2d} actions={len(actions):6d} NLL {nll:.4f}  max |fit - target| = {np.abs(fit - target).max():.3f}"
-        )
+        print(f"  n={n:2d} actions={len(actions):6d} NLL {nll:.4f}  max |fit - target| = {gap:.3f}")
     for n in (1, 2, 5, 10, 20):
         print(f"  n={n:2d}: max |fit(n) - fit(40)| = {np.abs(fits[n] - fits[40]).max():.3f}")

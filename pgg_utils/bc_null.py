@@ -78,6 +78,20 @@ def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) 
     return np.concatenate(seen_actions)
 
 
+def reach(agent, kind: str, null: torch.Tensor, actions: np.ndarray) -> float:
+    """How far the fitted unconditional branch lies from the likelihood's unconstrained maximum, which the
+    frozen actor may not reach: continuous, the largest gap of its mean to the mean action, in units of σ;
+    discrete, the largest gap of its probabilities to the action frequencies."""
+    with torch.no_grad():
+        if kind == "discrete":
+            probabilities = torch.softmax(agent.actor(null[None])[0], -1).numpy()
+            return float(
+                np.abs(probabilities - np.bincount(actions, minlength=len(probabilities)) / len(actions)).max()
+            )
+        sigma = agent.actor_logstd.exp()[0].numpy()
+        return float(np.abs((agent.actor_mean(null[None])[0].numpy() - actions.mean(0)) / sigma).max())
+
+
 def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rate: float) -> tuple[torch.Tensor, float]:
     """(the null embedding that maximises the likelihood of `actions` under pi(.|null), the final mean
     negative log-likelihood per action, constants included). Only the null embedding moves."""
@@ -116,6 +130,7 @@ def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
     null, nll = fit_null(agent, ckpt["action_space"], actions, args.fit_steps, args.learning_rate)
     fit = {"method": BC_FIT, "episodes": args.episodes, "episode_seed": args.episode_seed, "actions": len(actions),
            "fit_steps": args.fit_steps, "learning_rate": args.learning_rate, "nll": nll,
+           "reach": reach(agent, ckpt["action_space"], null, actions),
            "source": str(path), "source_null_norm": float(ckpt["model"]["null_obs"].norm())}  # fmt: skip
     return {**ckpt, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
 
