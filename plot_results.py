@@ -111,7 +111,11 @@ ROOT = Path(__file__).resolve().parent
 REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
                     "null_branch", "seed", "return"}  # fmt: skip
 KINDS = ("discrete", "continuous")
-NULL_BRANCHES = ("learned", "uniform", "bc")  # the sweep's null_branch column  # the paper's two tables, by action space
+NULL_BRANCHES = (
+    "learned",
+    "uniform",
+    "bc",
+)  # the sweep's null_branch column  # the paper's two tables, by action space
 # The eval γ a paper figure draws where it is fewer than its table's (its continuous dropout figure: 1.0-1.2).
 # Our figure of that variant draws the same range; the other swept γ go to fig_<kind>_<variant>_beyond_paper.
 PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}

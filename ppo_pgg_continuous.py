@@ -460,6 +460,19 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
+def null_bc_loss(agent: Agent, obs: torch.Tensor, actions: torch.Tensor, route: str) -> torch.Tensor:  # PGG
+    """Mean -log pi(a|null) of the rollout's actions: behaviour cloning by the unconditional branch, with the
+    policy's σ held (it is the conditional policy's too). Route "null": the actor's weights are held for this
+    term, so it trains the null embedding alone; "actor": it trains the shared actor as well."""
+    null_in = agent.null_input(obs)  # PGG
+    if route == "null":  # PGG
+        held = {name: weight.detach() for name, weight in agent.actor_mean.named_parameters()}  # PGG
+        mean_null = torch.func.functional_call(agent.actor_mean, held, (null_in,))  # PGG
+    else:  # PGG
+        mean_null = agent.actor_mean(null_in)  # PGG
+    return -gaussian_log_prob(actions, mean_null, agent.actor_logstd.detach()).mean()  # PGG
+
+
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
@@ -516,6 +529,9 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
 
     entropy_loss = entropy.mean()
     loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+    if args.null_bc_coef:  # PGG: the unconditional branch clones the rollout's actions
+        cloning = null_bc_loss(agent, mb_obs, batch["actions"][mb_inds], args.null_bc_route)  # PGG
+        loss = loss + args.null_bc_coef * cloning  # PGG
     return loss, {
         "losses/value_loss": v_loss.detach(),
         "losses/policy_loss": pg_loss.detach(),

@@ -324,6 +324,18 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
     return torch.from_numpy(advantages), torch.from_numpy(advantages + values)
 
 
+def null_bc_loss(agent: Agent, actions: torch.Tensor, route: str) -> torch.Tensor:  # PGG
+    """Mean -log pi(a|null) of the rollout's actions: behaviour cloning by the unconditional branch. Route
+    "null": the actor's weights are held for this term, so it trains the null embedding alone; "actor": it
+    trains the shared actor as well."""
+    if route == "null":  # PGG
+        held = {name: weight.detach() for name, weight in agent.actor.named_parameters()}  # PGG
+        logits_null = torch.func.functional_call(agent.actor, held, (agent.null_obs.unsqueeze(0),))  # PGG
+    else:  # PGG
+        logits_null = agent.actor(agent.null_obs.unsqueeze(0))  # PGG
+    return nn.functional.cross_entropy(logits_null.expand(len(actions), -1), actions)  # PGG
+
+
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
     """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
     place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
@@ -380,6 +392,8 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
 
     entropy_loss = entropy.mean()
     loss = pg_loss - args.ent_coef * entropy_loss + v_loss * args.vf_coef
+    if args.null_bc_coef:  # PGG: the unconditional branch clones the rollout's actions
+        loss = loss + args.null_bc_coef * null_bc_loss(agent, batch["actions"][mb_inds], args.null_bc_route)  # PGG
     return loss, {
         "losses/value_loss": v_loss.detach(),
         "losses/policy_loss": pg_loss.detach(),

@@ -79,6 +79,9 @@ def paper_name(variant: str) -> str:
             parts.append(f"KL target {part[2:]}")
         elif part.startswith("drop"):
             parts.append(f"dropout {part[4:]}")
+        elif part.startswith("bc"):
+            routed = part.endswith("actor")
+            parts.append(f"behaviour-cloned null {part[2:].removesuffix('actor')}{' (actor too)' if routed else ''}")
         elif part == "goal":
             parts.append("goal null")
         elif part.startswith("null"):

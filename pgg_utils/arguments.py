@@ -118,6 +118,8 @@ ARGUMENT_RULES = {
     "target_kl": (lambda v: v is None or 0 < v < math.inf, "a finite number > 0"),
     # At 1 no row keeps its state: every ratio compares pi(a|null) with the pi_hat(a|s) that acted, and the
     # KL and clip fraction of the kept rows are of none.
+    "null_bc_coef": (lambda v: 0 <= v < math.inf, "a finite number >= 0"),
+    "null_bc_route": (lambda v: v in ("null", "actor"), "null or actor"),
     "cond_dropout": (lambda v: 0 <= v < 1, "in [0, 1) (at 1 no row keeps its state)"),
     "guidance": (lambda v: guidance_error(v) is None, f"a number in [0, {MAX_GUIDANCE:g}]"),
     "guidance_schedule": (lambda v: v in SCHEDULES, ", ".join(SCHEDULES)),

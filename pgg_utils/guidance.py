@@ -29,13 +29,17 @@ class GuidanceArgs:
     """with --guidance-schedule adaptive: the range γ_train is kept in"""
     cond_dropout: float = 0.0
     """probability that a sample's actor input is replaced by the null embedding during updates"""
+    null_bc_coef: float = 0.0
+    """behaviour cloning of the rollout's actions by the unconditional branch: the coefficient of their mean -log pi(a|null) in the loss (0: off, the paper's)"""
+    null_bc_route: Literal["null", "actor"] = "null"
+    """with --null-bc-coef: what the cloning term trains, the null embedding alone (the actor's weights held for it) or the null embedding and the shared actor"""
 
 
 def uses_null_branch(args) -> bool:
-    """Whether guidance puts the unconditional branch pi(.|null) in the objective: guidance other than 1
-    at some iteration, or conditioning dropout. When it does not, the actor runs PPO's own pass; the
+    """Whether PGG puts the unconditional branch pi(.|null) in the objective: guidance other than 1 at
+    some iteration, conditioning dropout, or behaviour cloning by it. When it does not, the actor runs PPO's own pass; the
     null embedding then trains only where another term of the loss reads it (reads_parameter)."""
-    if args.cond_dropout > 0 or args.guidance_schedule == "adaptive":
+    if args.cond_dropout > 0 or args.guidance_schedule == "adaptive" or args.null_bc_coef > 0:
         return True
     final = args.guidance_final if args.guidance_schedule == "linear" else args.guidance
     return args.guidance != 1.0 or final != 1.0

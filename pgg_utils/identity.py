@@ -12,7 +12,7 @@ from pgg_utils.arguments import RUN_ONLY_ARGS, env_id_in_path
 
 # Arguments the variant id names; the configuration label lists the other training arguments.
 VARIANT_ARGS = frozenset({"guidance", "guidance_schedule", "guidance_final", "guidance_kl_target", "cond_dropout",
-                          "null_dims"})  # fmt: skip
+                          "null_dims", "null_bc_coef", "null_bc_route"})  # fmt: skip
 # The observation dimensions of a task's goal, named `goal` in a variant (--null-dims), from gymnasium's
 # documentation of the v4 observations: Reacher's target position (4, 5) and fingertip-minus-target
 # vector (8, 9, 10); Pusher's goal position (20, 21, 22). Reacher draws its target anew each episode;
@@ -22,7 +22,7 @@ GOAL_DIMS = {"Reacher-v4": (4, 5, 8, 9, 10), "Pusher-v4": (20, 21, 22)}
 
 # PGG's arguments at the values that train PPO (a constant γ_train of 1, the whole observation nulled).
 PPO_GUIDANCE = {"guidance": 1.0, "guidance_schedule": "constant", "guidance_final": None, "guidance_kl_target": None,
-                "guidance_bounds": (1.0, 1.5), "cond_dropout": 0.0}  # fmt: skip
+                "guidance_bounds": (1.0, 1.5), "cond_dropout": 0.0, "null_bc_coef": 0.0, "null_bc_route": "null"}  # fmt: skip
 # The defaults labels are written against, by action space: CleanRL's for ppo.py and
 # ppo_continuous_action.py (its `gamma` is our `discount`), with PGG's arguments at PPO, which the two
 # training scripts' defaults equal (tests/test_extending.py). Frozen, as data: changing a script's
@@ -65,12 +65,20 @@ def null_part(args: dict) -> str:
     return "null" + "-".join(str(d) for d in dims)
 
 
+def cloning_part(args: dict) -> str:
+    """`` (no behaviour cloning by the null branch), `bc0.1` (--null-bc-coef 0.1), `bc0.1actor` (routed
+    into the shared actor too)."""
+    coef = float(args.get("null_bc_coef", 0.0))
+    return f"bc{coef:g}{'actor' if args.get('null_bc_route', 'null') == 'actor' else ''}" if coef else ""
+
+
 def variant_id(args: dict) -> str:
-    """`ppo`, `pgg_g1.1`, `pgg_drop0.1`, `pgg_g1.1_drop0.1`, `pgg_g1to1.2`, `pgg_g1.1_goal`, ...: a run's
-    variant from its PGG arguments (those an older checkpoint lacks at their PPO values)."""
+    """`ppo`, `pgg_g1.1`, `pgg_drop0.1`, `pgg_g1.1_drop0.1`, `pgg_g1to1.2`, `pgg_g1.1_goal`, `pgg_g1.1_bc0.1`,
+    ...: a run's variant from its PGG arguments (those an older checkpoint lacks at their PPO values)."""
     guidance, dropout = guidance_part(args), float(args.get("cond_dropout", 0.0))
     parts = [] if guidance == "g1" else [guidance]
     parts += [f"drop{dropout:g}"] if dropout else []
+    parts += [cloning_part(args)] if cloning_part(args) else []
     parts += [null_part(args)] if parts and null_part(args) else []  # null dims matter only where guidance does
     return "pgg_" + "_".join(parts) if parts else "ppo"
 
@@ -102,10 +110,11 @@ def format_arg(value) -> str:
 
 def run_name(args) -> str:
     """The default run directory name: `{env_id}__{exp_name}__g1.1__p0__s1`, with the schedule in place
-    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`) and `__goal` (or `__null4-5`) for partial null inputs;
+    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`), `__goal` (or `__null4-5`) for partial null inputs and
+    `__bc0.1` for behaviour cloning by the null branch;
     a namespaced id's ':' and '/' become '-' (arguments.env_id_in_path)."""
     values = vars(args)
-    null = f"__{null_part(values)}" if null_part(values) else ""
+    null = "".join(f"__{part}" for part in (null_part(values), cloning_part(values)) if part)
     return f"{env_id_in_path(args.env_id)}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
 
 

@@ -711,3 +711,34 @@ def test_a_script_copied_outside_the_repository_trains_with_the_installed_projec
     (evaluated,) = files.read_csv(outside / "swept" / "evaluated_by.csv")
     assert evaluated["evaluated_by"] == str(outside / "my_ppo.py") and evaluated["same_script"] == "yes"
     assert f"script={outside / 'my_ppo.py'}" in files.read_csv(outside / "swept" / "summary.csv")[0]["config"]
+
+
+# --- behaviour cloning by the null branch while training ------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_behaviour_cloning_by_the_null_branch_trains_it_at_guidance_one_and_routes_its_gradient(kind, tmp_path):
+    module = SCRIPTS[kind]
+    args = small_args(kind, tmp_path, guidance=1.0, cond_dropout=0.0, null_bc_coef=0.5)
+    run_dir = train(module, args)
+    ckpt = load(run_dir, args.total_timesteps)
+    assert ckpt["model"]["null_obs"].abs().sum() > 0  # the loss reads the null branch: it trains at γ_train 1
+    assert run_dir.name.endswith("__bc0.5__s1") and identity.variant_id(ckpt["args"]) == "pgg_bc0.5"
+    agent = module.agent_from_checkpoint(ckpt)
+    agent.train()
+    obs = torch.randn(16, ckpt["obs_dim"])
+    if kind == "discrete":
+        actions = torch.randint(0, ckpt["n_actions"], (16,))
+        term = lambda route: module.null_bc_loss(agent, actions, route)
+        actor = agent.actor
+    else:
+        actions = torch.randn(16, ckpt["action_dim"])
+        term = lambda route: module.null_bc_loss(agent, obs, actions, route)
+        actor = agent.actor_mean
+    for route, actor_learns in (("null", False), ("actor", True)):
+        agent.zero_grad(set_to_none=True)
+        term(route).backward()
+        assert agent.null_obs.grad.abs().sum() > 0
+        moved = [p.grad is not None and p.grad.abs().sum() > 0 for p in actor.parameters()]
+        assert all(moved) if actor_learns else not any(moved)
+        assert agent.actor_logstd.grad is None if kind == "continuous" else True  # the policy's σ is not cloned
