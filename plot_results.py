@@ -90,7 +90,7 @@ from paper_study.agreement import (
     task_summaries,
 )
 from paper_study.figures import cell_index, ordered_series
-from paper_study.paper import PAPER_ENVS, action_kind, paper_name, variant_rank
+from paper_study.paper import PAPER_ENVS, action_kind, paper_name, series_name, variant_rank
 from pgg_utils import files
 from pgg_utils.files import (
     MANIFEST,
@@ -609,7 +609,7 @@ def table_rows(summary: list[dict], envs: list[str], ppo_sweep: bool, latex: boo
             continue
         for _, series in ppo_series:
             if any((e, "ppo", series, step, 1.0) in cells for e in envs):
-                name = "PPO" + (f" [{series}]" if series else "")
+                name = series_name("ppo", series)
                 yield ("row", name, [fmt_cell(cells.get((e, "ppo", series, step, 1.0)), latex) for e in envs])
         for variant, series in guided:
             yield ("row", label(variant, series), None)

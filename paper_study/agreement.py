@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from paper_study.paper import PAPER_SEEDS, paper_rows
+from paper_study.paper import PAPER_SEEDS, paper_rows, with_series
 from paper_study.stats import (
     ALPHA,
     POWER,
@@ -48,7 +48,7 @@ def step_label(step: int) -> str:
 
 def series_id(variant: str, series: str) -> str:
     """A variant with the label of its configuration, where an env and variant hold several."""
-    return variant + (f" [{series}]" if series else "")
+    return with_series(variant, series)
 
 
 def other_mujoco(row: dict | None) -> bool:
@@ -235,9 +235,7 @@ def p_is(p: float) -> str:
 
 def cell_name(r: dict) -> str:
     name = "PPO" if r["variant"] == "ppo" else f"γ_train 1.1 γ={r['eval_guidance']:g}"
-    if r["series"]:
-        name += f" [{r['series']}]"
-    return f"{step_label(r['step'])} {name}"
+    return f"{step_label(r['step'])} {with_series(name, r['series'])}"
 
 
 def env_headline(env: str, rows: list[dict]) -> str:

@@ -19,7 +19,7 @@ import matplotlib.ticker
 import numpy as np
 
 from paper_study.agreement import other_mujoco, step_label
-from paper_study.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank
+from paper_study.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank, with_series
 from pgg_utils.pooling import mean_ci95
 
 # The possible return of a task, where it has one: axes never extend past it.
@@ -361,7 +361,7 @@ def figure_for_variant(
                 ]
                 if not points:
                     continue
-                label = f"γ = {gamma:g}" + (f" [{series}]" if series else "")
+                label = with_series(f"γ = {gamma:g}", series)
                 line, data = plot_series(ax, dodge([p[0] for p in points], k, len(gammas), spacing), [p[1] for p in points],
                                          errorbars=not few, band_alpha=0.04 if few else 0.08,
                                          color=gamma_colour(gamma, kind), marker=gamma_marker(gamma, kind),

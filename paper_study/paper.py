@@ -121,6 +121,11 @@ def variant_rank(variant: str) -> int:
     return list(VARIANTS).index(variant) if variant in VARIANTS else len(VARIANTS)
 
 
+def with_series(name: str, series: str) -> str:
+    """A name with the label of its configuration, where an env and variant hold several: `name [series]`."""
+    return name + (f" [{series}]" if series else "")
+
+
 def series_name(variant: str, series: str) -> str:
     """The paper's name of a variant, with its configuration label where one env and variant hold several."""
-    return paper_name(variant) + (f" [{series}]" if series else "")
+    return with_series(paper_name(variant), series)
