@@ -57,7 +57,7 @@ BASELINES = ("ppo", "pgg_g1.1")
 # folder, and the suffix that keys a fitted null's cells beside the same agents' own null in `means`.
 BC_FOLDER, BC = "bc_null", " null=bc"
 GOAL_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "{goal}" in flags}
-SCHEDULE_VARIANTS = set(BEYOND_VARIANTS) - GOAL_VARIANTS
+SCHEDULE_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--guidance-schedule" in flags}
 COLLAPSE_FRACTION = 0.5
 REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
                   "p", "p_holm", "detectable_gap", "n_seeds", "baseline_n_seeds"]  # fmt: skip

@@ -26,6 +26,8 @@ BEYOND_VARIANTS = {
     "pgg_adaptive1.1_kl0.04": ("--guidance", "1.1", "--guidance-schedule", "adaptive", "--guidance-kl-target", "0.04",
                                "--guidance-bounds", "1", "1.3"),
     "pgg_g1.1_goal": ("--guidance", "1.1", "--null-dims", "{goal}"),
+    # the unconditional branch clones the rollout's actions, the null embedding alone (results/beyond/bc_train's pilot)
+    "pgg_g1.1_bc0.1": ("--guidance", "1.1", "--null-bc-coef", "0.1"),
 }  # fmt: skip
 
 
