@@ -163,8 +163,9 @@ class GuidedPolicy:
     uniform-null control, zeros). Where the null embedding replaces chosen dimensions only, the
     unconditional branch depends on the observation and `act` computes it per row."""
 
-    def __init__(self, agent, ckpt: dict, uniform_null: bool = False):
+    def __init__(self, agent, ckpt: dict, uniform_null: bool = False, module=None):
         self.agent, self.kind, self.env_id = agent, ckpt["action_space"], ckpt["env_id"]
+        self.module = module or inspect.getmodule(type(agent))  # the script that evaluates: it makes the env
         with torch.no_grad():
             if self.kind == "discrete":
                 learned = agent.unconditional_logits().numpy()
@@ -178,8 +179,8 @@ class GuidedPolicy:
         return self.agent.act(raw_obs, guidance, deterministic, noise, **self.null)
 
     def make_env(self):
-        """An evaluation env of the checkpoint's task, made as the script that defines the agent makes it."""
-        return inspect.getmodule(type(self.agent)).make_env(self.env_id)()
+        """An evaluation env of the checkpoint's task, made as the script that evaluates the agent makes it."""
+        return self.module.make_env(self.env_id)()
 
 
 def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
@@ -307,11 +308,11 @@ def run_job(job: Job) -> JobResult:
     episodes, eval_seed, deterministic, uniform_null = job.settings
     try:
         digest, ckpt = read_checkpoint(job.checkpoint)
-        agent, _, _ = scripts.load_agent(ckpt, job.checkpoint, (job.script,))
+        agent, module, _ = scripts.load_agent(ckpt, job.checkpoint, (job.script,))
         fields = configuration_fields(ckpt)
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
-    policy = GuidedPolicy(agent, ckpt, uniform_null)
+    policy = GuidedPolicy(agent, ckpt, uniform_null, module)
     returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
     if not np.isfinite(returns).all():
         bad = np.flatnonzero(~np.isfinite(returns))

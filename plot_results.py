@@ -478,14 +478,13 @@ def incomplete_run(run_dir: Path, run_args: dict, accumulator) -> str | None:
     """Why a run's TensorBoard events cannot be drawn as a whole run, or None where they can: they hold
     no episodic return, or they end (the last step of any scalar; every training iteration logs its
     losses at its global step) before the run's total_timesteps or its last checkpoint."""
-    from pgg_utils.runs import CHECKPOINT_GLOB, checkpoint_step  # torch: only where --runs is given
+    from pgg_utils.runs import checkpoint_step, checkpoints_of  # torch: only where --runs is given
 
     tags = accumulator.Tags()["scalars"]
     if "charts/episodic_return" not in tags:
         return "its TensorBoard events hold no episodic return (missing or damaged)"
     events_end = max(event.step for tag in tags for event in accumulator.Scalars(tag))
-    checkpoints = [name.name for name in (run_dir / "checkpoints").glob(CHECKPOINT_GLOB)]
-    checkpoint_end = max((checkpoint_step(name) for name in checkpoints if name[5:-3].isdigit()), default=0)
+    checkpoint_end = max((checkpoint_step(path) for path in checkpoints_of(run_dir)), default=0)
     total = run_args.get("total_timesteps")
     if events_end >= max(checkpoint_end, total if isinstance(total, int) else 0):
         return None

@@ -496,7 +496,8 @@ def train(args: Args, run: runs.Run) -> None:
     guided = uses_null_branch(args)  # PGG
     null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim), torch.zeros(2), torch.zeros(2))  # PGG
     null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
-    trains_null = guided or reads_parameter(null_probe_loss, agent.null_obs)  # PGG
+    null_obs = dict(agent.named_parameters()).get("null_obs")  # PGG: none in a network without the null branch
+    trains_null = guided or reads_parameter(null_probe_loss, null_obs)  # PGG
     trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)

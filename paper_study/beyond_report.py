@@ -538,38 +538,45 @@ def glance_section(means: dict, variants_of: dict, distance: dict, gamma_one_p: 
     return lines
 
 
-def paired_test(ours: list[float], theirs: list[float]) -> dict:
-    """A paired t test of two lists of one set of seeds (the same agents, the same episodes): the mean
-    difference, p, and the difference one test detects with 80% power at α = 0.05 (the noncentral t)."""
-    differences = np.asarray(ours) - np.asarray(theirs)
-    n, sd = len(differences), float(np.std(differences, ddof=1))
-    if sd == 0:
-        return {
-            "difference": float(differences.mean()),
-            "p": 1.0 if differences.mean() == 0 else 0.0,
-            "detectable": 0.0,
-        }
+def paired_test(ours: dict, theirs: dict) -> dict | None:
+    """A paired t test of two {seed: value} (the same agents, the same episodes) on their shared seeds: the
+    mean difference, p, and the difference one test detects with 80% power at α = 0.05 (the noncentral t);
+    None with fewer than 3 shared seeds or no spread in the differences, where no test means anything."""
+    seeds = sorted(ours.keys() & theirs.keys())
+    differences = np.array([ours[seed] - theirs[seed] for seed in seeds])
+    if len(seeds) < 3 or not np.std(differences) > 0:
+        return None
+    n, sd = len(seeds), float(np.std(differences, ddof=1))
     critical = stats.t.ppf(1 - ALPHA / 2, n - 1)
     # The lower tail is below 1e-10 where the power nears 0.8, and scipy's noncentral t returns NaN far out in it.
     power = lambda gap: stats.nct.sf(critical, n - 1, gap * math.sqrt(n) / sd)
-    detectable = float(optimize.brentq(lambda gap: power(gap) - 0.8, 1e-9 * sd, 10 * sd))  # power 1 at 10 sd
-    return {"difference": float(differences.mean()), "p": float(stats.ttest_rel(ours, theirs).pvalue),
-            "detectable": detectable}  # fmt: skip
+    high = sd
+    while power(high) < 0.8:
+        high *= 2
+    return {"difference": float(differences.mean()), "n": n, "p": float(stats.ttest_1samp(differences, 0.0).pvalue),
+            "detectable": float(optimize.brentq(lambda gap: power(gap) - 0.8, 0.0, high))}  # fmt: skip
 
 
-def read_bc(folder: Path, args: Args) -> tuple[dict, list[tuple[str, str]], dict]:
-    """(means, the (task, variant) of each fitted set, held-out rows) of the behaviour-cloned nulls: the
-    fitted nulls' cells keyed `<variant> null=bc`, beside the same agents' cells with their own null (from
-    the tables, at the fitted checkpoints' step) under the variant itself; held-out rows keyed so too."""
-    path = folder / BC_FOLDER / "episodes.csv"
-    if not path.exists():
-        return {}, [], {}
-    with open(path, newline="") as f:
-        fitted = [r for r in csv.DictReader(f) if r["policy"] == "sample" and r["null_branch"] == "bc"]
-    step_of = {(r["env_id"], r["variant"]): r["step"] for r in fitted}
-    own = [r for table in (args.table, args.discrete_table) if Path(table).exists() for r in read_rows(Path(table))
-           if step_of.get((r["env_id"], r["variant"])) == r["step"]]  # fmt: skip
-    means = seed_means(own + [{**r, "variant": r["variant"] + BC} for r in fitted])
+def read_bc(folder: Path, args: Args) -> tuple[dict, dict, list[tuple[str, str]], dict]:
+    """(means, fresh means, the (task, variant) of each fitted set, held-out rows) of the behaviour-cloned
+    nulls: the fitted nulls' cells keyed `<variant> null=bc`, beside the same agents' cells with their own
+    null (from the tables, at the fitted checkpoints' step) under the variant itself; on the sweep's episodes
+    (seeds 10000+) and on the fresh ones (20000+: the fitted nulls' and the same agents' own, own_null_fresh.csv,
+    every γ); held-out rows keyed so too."""
+    if not (folder / BC_FOLDER / "episodes.csv").exists():
+        return {}, {}, [], {}
+
+    def both_nulls(fitted_csv: Path, tables: tuple[str, ...]) -> dict:
+        with open(fitted_csv, newline="") as f:
+            fitted = [r for r in csv.DictReader(f) if r["policy"] == "sample" and r["null_branch"] == "bc"]
+        step_of = {(r["env_id"], r["variant"]): r["step"] for r in fitted}
+        own = [r for table in tables if Path(table).exists() for r in read_rows(Path(table))
+               if step_of.get((r["env_id"], r["variant"])) == r["step"]]  # fmt: skip
+        return seed_means(own + [{**r, "variant": r["variant"] + BC} for r in fitted]), step_of
+
+    means, step_of = both_nulls(folder / BC_FOLDER / "episodes.csv", (args.table, args.discrete_table))
+    fresh_csv, own_fresh = folder / BC_FOLDER / "heldout_fresh.csv", folder / BC_FOLDER / "own_null_fresh.csv"
+    fresh = both_nulls(fresh_csv, (str(own_fresh),))[0] if fresh_csv.exists() else {}
     heldout = {}
     for table in (args.table_heldout, args.discrete_heldout, folder / BC_FOLDER / "heldout_gamma.csv"):
         if Path(table).exists():
@@ -579,7 +586,7 @@ def read_bc(folder: Path, args: Args) -> tuple[dict, list[tuple[str, str]], dict
                     if step_of.get((r["env_id"], r["variant"])) == r["step"]:
                         heldout[(r["env_id"], variant)] = r
     order = lambda key: (key[0] not in PAPER_ENVS["continuous"], key[0], variant_rank(key[1]))
-    return means, sorted(step_of, key=order), heldout
+    return means, fresh, sorted(step_of, key=order), heldout
 
 
 def null_name(variant: str) -> str:
@@ -589,31 +596,50 @@ def null_name(variant: str) -> str:
     return "zero (untrained)" if variant == "ppo" else "learned"
 
 
-def bc_section(means: dict, sets: list[tuple[str, str]], heldout: dict, values_out: list[dict]) -> list[str]:
+def seeds_at(fresh: dict, env: str, key: str, gamma: float) -> dict:
+    """{seed: mean return} of one side's fresh cell at the task's last step and γ ({} where unswept)."""
+    return fresh.get((env, key, last_step(fresh, env), gamma), {}) if fresh else {}
+
+
+def bc_section(
+    means: dict, fresh: dict, sets: list[tuple[str, str]], heldout: dict, values_out: list[dict]
+) -> list[str]:
     """Question 3: does a behaviour-cloned unconditional branch make γ a more useful or a more stable knob?"""
     if not sets:
         return []
+    identical = sum(means.get((e, v + BC, last_step(means, e), 1.0)) == means.get((e, v, last_step(means, e), 1.0))
+                    for e, v in sets)  # fmt: skip
+    record(values_out, "", "", "question 3", "sets", len(sets))
+    record(values_out, "", "", "question 3", "γ = 1 cells equal", identical)
     lines = ["## Question 3: a behaviour-cloned unconditional branch", "",
              ("The null embedding of each of the tables' PPO and γ_train 1.1 agents at its last step, fitted by maximum "
-              "likelihood to the actions of 40 of the agent's own episodes at γ = 1 with the rest of the network frozen "
+              "likelihood to the actions of the agent's own episodes at γ = 1 with the rest of the network frozen "
               "(`pgg_utils/bc_null.py`; results/beyond/bc_null), swept on the tables' episodes. These comparisons "
               "isolate the unconditional branch: the same agents, the same episodes, another null. At γ = 1 the null "
-              "plays no part, and every γ = 1 cell equals the table's to the bit (the same machine and stack). The "
-              "other comparison the question asks for, a variant that clones the rollout's actions while it trains "
-              "against the constant γ_train 1.1, is not run yet."), "",
-             ("γ-response at the agents' last mark (means over seeds; best γ chosen on these episodes) and the γ chosen "
-              "on these episodes scored on fresh ones (episode seeds 20000+) against γ = 1 there, ± its 95% CI."), "",
+              f"plays no part: in {identical} of the {len(sets)} sets every seed's γ = 1 return equals the table's. "
+              "The other comparison the question asks for, a variant that clones the rollout's actions while it "
+              "trains against the constant γ_train 1.1, is not run yet."), "",
+             ("γ-response at the agents' last mark (means over seeds; the best γ chosen on these episodes) and that γ "
+              "scored on fresh episodes (seeds 20000+) against γ = 1 there, ± its 95% CI."), "",
              "| task | agents | null | γ = 1 | best γ: return | largest γ: return | largest vs best | held-out γ: fresh gain |",
              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    best_of = {}
     for env, variant in sets:
         for key in (variant, variant + BC):
             gammas, values = response_at_last_step(means, env, key)
             if any(math.isnan(v) for v in values):
                 continue
             (best, drop), at_one = largest_vs_best(values), values[gammas.index(1.0)]
+            best_of[(env, key)] = (gammas[best], gammas[-1])
             held = heldout.get((env, key))
-            chosen = "–" if held is None else (f"{float(held['selected_gamma']):g}: {float(held['fresh_gain']):+.1f} ± "
-                                               f"{float(held['fresh_gain_ci95'] or 0):.1f}")  # fmt: skip
+            ci = (
+                "n/a"
+                if held is None or held["fresh_gain_ci95"] in ("", "nan")
+                else f"{float(held['fresh_gain_ci95']):.1f}"
+            )
+            chosen = (
+                "–" if held is None else f"{float(held['selected_gamma']):g}: {float(held['fresh_gain']):+.1f} ± {ci}"
+            )
             for quantity, value in (("return at γ 1", at_one), ("best γ", gammas[best]), ("return at best γ", values[best]),
                                     ("largest γ", gammas[-1]), ("return at largest γ", values[-1]),
                                     ("largest γ vs best (%)", 100 * drop)):  # fmt: skip
@@ -622,47 +648,65 @@ def bc_section(means: dict, sets: list[tuple[str, str]], heldout: dict, values_o
                          f"{values[best]:.1f} | {gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {chosen} |")  # fmt: skip
     tests = []
     for env, variant in sets:
-        (best_own, falls_own, returns_own), (best_bc, falls_bc, returns_bc) = (
-            seed_falls(means, env, key) for key in (variant, variant + BC)
-        )
-        if len(falls_own) < 2 or len(falls_own) != len(falls_bc):
+        if (env, variant) not in best_of or (env, variant + BC) not in best_of:
             continue
+        sides = {}
+        for key in (variant, variant + BC):  # each side at its best γ of the sweep, scored on the fresh episodes
+            best, largest = best_of[(env, key)]
+            at_best, at_largest = seeds_at(fresh, env, key, best), seeds_at(fresh, env, key, largest)
+            sides[key] = (at_best, {seed: (at_largest[seed] - value) / abs(value) for seed, value in at_best.items()
+                                    if seed in at_largest and value != 0})  # fmt: skip
         cells_own, cells_bc = cells_of(means, env, variant), cells_of(means, env, variant + BC)
         common = sorted(c for c in set(cells_own) & set(cells_bc) if c[1] != 1.0)
         seeds = sorted(set.intersection(*(set(cells_bc[c]) for c in common)))
         block = np.array([[cells_bc[c][seed] for seed in seeds] for c in common])
         references = np.array([summary(cells_own[c])[0] for c in common])
         differences = [summary(cells_bc[c])[0] - summary(cells_own[c])[0] for c in common]
-        tests.append({"env_id": env, "variant": variant, "best": best_own, "best_bc": best_bc,
-                      "fall": paired_test(falls_bc, falls_own), "return": paired_test(returns_bc, returns_own),
+        tests.append({"env_id": env, "variant": variant, "best": best_of[(env, variant)][0],
+                      "best_bc": best_of[(env, variant + BC)][0],
+                      "fall": paired_test(sides[variant + BC][1], sides[variant][1]),
+                      "return": paired_test(sides[variant + BC][0], sides[variant][0]),
                       "above": sum(d > 0 for d in differences), "below": sum(d < 0 for d in differences),
                       "cells": len(common), "gap": median_relative_gap([(block, references)])})  # fmt: skip
     for kind in ("fall", "return"):
-        for test, p_holm in zip(tests, holm([t[kind]["p"] for t in tests])):
-            test[kind]["p_holm"] = p_holm
-    lines += ["", (f"Is γ more stable with the cloned null? Each seed's fall from its side's best γ to the largest, and "
-                   f"its return at that best γ, the cloned null's minus the agent's own, paired by seed (t test; Holm "
-                   f"over the {len(tests)} tests of each kind; the difference one test detects with 80% power at "
-                   "α = 0.05, before Holm). Then every γ ≠ 1 cell: how many lie above and below the own null's, and the "
-                   "median relative gap with its exact bootstrap interval over seeds (the own null's means held "
-                   "fixed)."), "",
-              ("| task | agents | best γ (own null's) | fall difference | p (Holm) | detectable | return difference "
-               "at best γ | p (Holm) | detectable | cells above / below | median gap [95% CI] |"),
+        tested = [t[kind] for t in tests if t[kind] is not None]
+        for test, p_holm in zip(tested, holm([t["p"] for t in tested])):
+            test["p_holm"] = p_holm
+    family = {kind: sum(t[kind] is not None for t in tests) for kind in ("fall", "return")}
+    lines += ["", ("Is γ more stable, or more useful, with the cloned null? Each side's best γ is chosen on the sweep above "
+                   "and scored on the fresh episodes, so that the test is not made on the episodes that chose it: each "
+                   "seed's fall there from that γ to the largest, and its return there at that γ, the cloned null's "
+                   "minus the agent's own, paired by seed (t test; Holm over the "
+                   f"{family['fall']} fall and {family['return']} return tests apart; the difference one test detects "
+                   "with 80% power at α = 0.05, before Holm; n/a where the seeds do not differ, e.g. at CartPole's "
+                   "ceiling). Then every γ ≠ 1 cell of the sweep: how many lie above and below the own null's, and the "
+                   "median relative gap with its exact bootstrap interval over seeds (the own null's means held fixed, "
+                   "so the interval is the cloned side's uncertainty only)."), "",
+              ("| task | agents | best γ: cloned (own) | fresh fall difference | p (Holm) | detectable | fresh return "
+               "difference at best γ | p (Holm) | detectable | cells above / below | median gap [95% CI] |"),
               "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for t in tests:
-        fall, ret = t["fall"], t["return"]
-        for quantity, value in (("fall difference (pts)", 100 * fall["difference"]), ("fall p", fall["p"]),
-                                ("fall p Holm", fall["p_holm"]), ("fall detectable (pts)", 100 * fall["detectable"]),
-                                ("return difference at best γ", ret["difference"]), ("return p", ret["p"]),
-                                ("return p Holm", ret["p_holm"]), ("return detectable", ret["detectable"]),
-                                ("cells above", t["above"]), ("cells below", t["below"]), ("cells", t["cells"]),
+        cells = []
+        for kind, unit in (("fall", "pts"), ("return", "")):
+            test = t[kind]
+            if test is None:
+                cells += ["n/a", "n/a", "n/a"]
+                continue
+            scale = 100 if unit else 1
+            names = {"fall": ("fall difference (pts)", "fall detectable (pts)"),
+                     "return": ("return difference at best γ", "return detectable")}[kind]  # fmt: skip
+            for quantity, value in ((names[0], scale * test["difference"]), (f"{kind} p", test["p"]),
+                                    (f"{kind} p Holm", test["p_holm"]), (names[1], scale * test["detectable"])):  # fmt: skip
+                record(values_out, t["env_id"], t["variant"] + BC, t["variant"], quantity, value)
+            shown = points if unit else (lambda x, sign=True: fmt(x))
+            cells += [shown(test["difference"]), f"{fmt_p(test['p'])} ({fmt_p(test['p_holm'])})",
+                      shown(test["detectable"], sign=False)]  # fmt: skip
+        for quantity, value in (("cells above", t["above"]), ("cells below", t["below"]), ("cells", t["cells"]),
                                 ("median gap (%)", 100 * t["gap"][0]), ("median gap low (%)", 100 * t["gap"][1]),
                                 ("median gap high (%)", 100 * t["gap"][2])):  # fmt: skip
             record(values_out, t["env_id"], t["variant"] + BC, t["variant"], quantity, value)
         lines.append(f"| {t['env_id']} | {paper_name(t['variant'])} | {t['best_bc']:g} ({t['best']:g}) | "
-                     f"{points(fall['difference'])} | {fmt_p(fall['p'])} ({fmt_p(fall['p_holm'])}) | "
-                     f"{points(fall['detectable'], sign=False)} | {fmt(ret['difference'])} | {fmt_p(ret['p'])} "
-                     f"({fmt_p(ret['p_holm'])}) | {fmt(ret['detectable'])} | {t['above']} / {t['below']} | "
+                     + " | ".join(cells) + f" | {t['above']} / {t['below']} | "
                      f"{pct(t['gap'][0])} [{pct(t['gap'][1])}, {pct(t['gap'][2])}] |")  # fmt: skip
     return [*lines, ""]
 
@@ -792,8 +836,8 @@ def report(args: Args) -> list[Path]:
              "trained here."), "", *glance_section(means, variants_of, distance, [r["p"] for r in rows], values)]  # fmt: skip
     for env in envs:
         lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories, values)
-    bc_means, bc_sets, bc_heldout = read_bc(folder, args)
-    lines += bc_section(bc_means, bc_sets, bc_heldout, values)
+    bc_means, bc_fresh, bc_sets, bc_heldout = read_bc(folder, args)
+    lines += bc_section(bc_means, bc_fresh, bc_sets, bc_heldout, values)
     written = [folder / "report.md", folder / "report.csv", folder / "report_values.csv", folder / "gamma_response.png"]
     if trajectories:
         written.append(folder / "guidance_trajectory.png")

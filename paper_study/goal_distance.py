@@ -77,7 +77,11 @@ def main() -> None:
         if not present:
             raise InputError(f"none of {', '.join(args.paths)} exists")
         for path in runs.find_checkpoints(present, args.steps):
-            agent, ckpt = sweep.load_any_checkpoint(path)
+            try:
+                agent, ckpt = sweep.load_any_checkpoint(path)
+            except ValueError as e:  # unreadable, non-finite, or its script not found: one line, the rest measured
+                print(f"skipped {path}: {e}", file=sys.stderr)
+                continue
             if ckpt["env_id"] not in args.envs:
                 continue
             variant, policy = variant_id(ckpt["args"]), sweep.GuidedPolicy(agent, ckpt)

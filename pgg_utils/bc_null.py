@@ -97,7 +97,8 @@ def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rat
     negative log-likelihood per action, constants included). Only the null embedding moves."""
     null = agent.null_obs.detach().clone().zero_().requires_grad_(True)
     optimizer = torch.optim.Adam([null], lr=learning_rate)
-    for parameter in agent.parameters():
+    trainable = [parameter for parameter in agent.parameters() if parameter.requires_grad]
+    for parameter in trainable:  # the rest of the agent is frozen: no gradient is computed for it
         parameter.requires_grad_(False)
     if kind == "discrete":
         targets = torch.as_tensor(actions, dtype=torch.long)
@@ -113,6 +114,8 @@ def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rat
         loss = nll()
         loss.backward()
         optimizer.step()
+    for parameter in trainable:
+        parameter.requires_grad_(True)
     with torch.no_grad():
         return null.detach(), float(nll())
 
@@ -132,7 +135,8 @@ def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
            "fit_steps": args.fit_steps, "learning_rate": args.learning_rate, "nll": nll,
            "reach": reach(agent, ckpt["action_space"], null, actions),
            "source": str(path), "source_null_norm": float(ckpt["model"]["null_obs"].norm())}  # fmt: skip
-    return {**ckpt, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
+    agent = {key: value for key, value in ckpt.items() if key != "resume"}  # an agent to evaluate, not to resume
+    return {**agent, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
 
 
 def main() -> None:

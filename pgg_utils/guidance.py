@@ -46,9 +46,9 @@ def uses_null_branch(args) -> bool:
 
 
 def reads_parameter(loss, parameter) -> bool:
-    """Whether the autograd graph of `loss` (a tensor) reaches `parameter`, a leaf: whether the objective
-    reads it at all, whatever its gradient's value. Walks the graph; computes nothing."""
-    seen, stack = set(), [loss.grad_fn]
+    """Whether the autograd graph of `loss` (a tensor) reaches `parameter`, a leaf (None: there is none):
+    whether the objective reads it at all, whatever its gradient's value. Walks the graph; computes nothing."""
+    seen, stack = set(), [loss.grad_fn] if parameter is not None else []
     while stack:
         node = stack.pop()
         if node is None or node in seen:

@@ -2,7 +2,7 @@
 (from its PGG arguments), its default run directory name, and its configuration, the one key runs are
 pooled by: the training script plus every training argument except the run-only ones. The label that
 shows a configuration names the script where it is not the repository's own and every argument that
-differs from its default (CleanRL's, frozen; a script's own for an argument CleanRL lacks), so a new
+differs from its default (CleanRL's, frozen) and every argument CleanRL lacks with its value, so a new
 argument in a script's `Args` keeps its runs apart with no table to extend. Plain Python: nothing of the paper study."""
 
 import functools
@@ -85,11 +85,10 @@ def variant_id(args: dict) -> str:
 
 def training_words(ckpt: dict) -> list[str]:
     """`key=value` for every training argument of a checkpoint outside the variant that differs from its
-    default: the frozen one (FROZEN_DEFAULTS of its action space) where there is one, else its script's
-    own as the checkpoint records them (`arg_defaults`: a fork's new argument), sorted by name. One an
-    older checkpoint lacks counts as the default; one with no default anywhere is named with its value."""
-    args = ckpt["args"]
-    defaults = {**ckpt.get("arg_defaults", {}), **FROZEN_DEFAULTS.get(ckpt.get("action_space"), {})}
+    frozen default (FROZEN_DEFAULTS of its action space), and for every argument those lack (a fork's
+    new one) whatever its value, sorted by name: two values of a fork's argument are two labels, whatever
+    the fork's default was when each ran. One an older checkpoint lacks counts as the default."""
+    args, defaults = ckpt["args"], FROZEN_DEFAULTS.get(ckpt.get("action_space"), {})
     words = []
     for key in sorted((defaults.keys() | args.keys()) - RUN_ONLY_ARGS - VARIANT_ARGS - {"env_id", "seed"}):
         value = args.get(key, defaults.get(key))

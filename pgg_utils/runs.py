@@ -781,7 +781,6 @@ class Run:
             "global_step": int(global_step),
             "step_mark": int(mark),
             "args": asdict(self.args),
-            "arg_defaults": asdict(type(self.args)()),  # what a new argument of a fork is labelled against
             "versions": package_versions(),
             "machine": self.machine,
             "code": self.code,

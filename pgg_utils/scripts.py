@@ -1,15 +1,14 @@
 """Which training script a checkpoint names, found and imported, so that a checkpoint is evaluated by
 the code that trained it, as CleanRL's evaluation takes `Agent` from the file that trained it.
 
-A checkpoint records its script (`script_path`): relative to the repository for a script in it (the
-two originals, or a fork copied beside them), absolute for a script elsewhere. A checkpoint is data:
-its script is looked up only in the repository and among the files the user names (`--script`), never
-at a path the checkpoint alone supplies. Checkpoints from before `script_path` name the script's stem
+A checkpoint records its script (`script_path`): its file name for a script at the top of the
+repository (the two originals, or a fork copied beside them), its absolute path for a script elsewhere.
+A checkpoint is data: its script is looked up only among the repository's top-level files and the files
+the user names (`--script`), never at a path the checkpoint alone supplies. Checkpoints from before `script_path` name the script's stem
 (`script`), always one of the repository's."""
 
 import functools
 import hashlib
-import importlib
 import importlib.util
 import inspect
 import sys
@@ -26,10 +25,10 @@ class ScriptError(ValueError):
 
 
 def recorded_path(script: Path) -> str:
-    """What a checkpoint records of the script that trains it: its path relative to the repository, or
-    its absolute path where it lies elsewhere."""
+    """What a checkpoint records of the script that trains it: its file name where it lies at the top of the
+    repository (beside the two originals), else its absolute path."""
     script = Path(script).resolve()
-    return str(script.relative_to(REPOSITORY)) if script.is_relative_to(REPOSITORY) else str(script)
+    return script.name if script.parent == REPOSITORY else str(script)
 
 
 def script_name(ckpt: dict) -> str:
@@ -57,16 +56,20 @@ def file_sha1(path: Path) -> str:
 
 def locate(ckpt: dict, given: tuple[Path, ...] = ()) -> Path:
     """The file that evaluates `ckpt`: a file of `given` (--script) with the file name of its script,
-    else the repository's file of its recorded name. ScriptError (one line) where neither exists."""
+    else the repository's top-level file of its recorded name. Nothing else: a name with a folder in it
+    (`../x.py`, `runs/x.py`) is never looked up, so a checkpoint alone can point at no other file.
+    ScriptError (one line) where no file is found."""
     name = script_name(ckpt)
     for path in given:
         if Path(path).name == Path(name).name:
             return Path(path).resolve()
-    if Path(name).is_absolute():
-        raise ScriptError(f"it was trained by {name}, outside the repository ({REPOSITORY}); scripts are looked up "
-                          f"there and in --script: pass --script {name} to evaluate it with that file")  # fmt: skip
+    if Path(name).name != name or not name.endswith(".py"):
+        which = name if Path(name).is_absolute() else "PATH"
+        raise ScriptError(f"it was trained by {name}, not a script at the top of the repository ({REPOSITORY}); "
+                          f"scripts are looked up there and in --script: pass --script {which} to evaluate it with "
+                          "that file")  # fmt: skip
     path = REPOSITORY / name
-    if not path.is_file():
+    if not path.is_file() or path.is_symlink():
         raise ScriptError(f"its training script {name} is not in the repository ({REPOSITORY}): pass --script PATH "
                           "to evaluate it with a copy of it")  # fmt: skip
     return path
@@ -78,17 +81,16 @@ def load_module(path: Path):
     their importable modules (`import ppo_pgg_continuous` is the same object); any other file gets a
     name of its own, so that two scripts of one file name never replace each other."""
     path = Path(path).resolve()
-    if path.parent == REPOSITORY and path.suffix == ".py":
-        module = importlib.import_module(path.stem)
-        if Path(module.__file__).resolve() == path:
-            return module
+    imported = sys.modules.get(path.stem)  # an original the caller imported already (`import ppo_pgg_continuous`)
+    if imported is not None and Path(getattr(imported, "__file__", "")).resolve() == path:
+        return imported
     name = f"pgg_script_{hashlib.sha1(str(path).encode()).hexdigest()[:12]}_{path.stem}"
     try:
         spec = importlib.util.spec_from_file_location(name, path)
         module = importlib.util.module_from_spec(spec)
         sys.modules[name] = module  # dataclasses resolve their fields' module through sys.modules
         spec.loader.exec_module(module)
-    except Exception as e:  # a script's import raises whatever its code raises
+    except (Exception, SystemExit) as e:  # a script's import raises whatever its code raises
         sys.modules.pop(name, None)
         raise ScriptError(
             f"cannot import {path} ({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})"
@@ -117,8 +119,11 @@ def load_agent(ckpt: dict, source, given: tuple[Path, ...] = ()):
     module, path = training_module(ckpt, given)
     try:
         agent = module.agent_from_checkpoint(ckpt, source)
-    except RuntimeError as e:  # load_state_dict's size mismatch: a fork whose network is another shape
-        raise ScriptError(f"{path.name}'s Agent cannot load its weights ({str(e).splitlines()[0]})") from None
+    except ValueError:  # the script's own one-line refusals (another script's checkpoint, non-finite weights)
+        raise
+    except Exception as e:  # load_state_dict's size mismatch (a fork whose network is another shape), or a fork's own
+        first = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ScriptError(f"{path.name}'s Agent cannot load its weights ({first})") from None
     return agent, module, path
 
 

@@ -390,41 +390,51 @@ def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
 
 
 def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_cloned_one(tmp_path):
-    """The same agents with another null: each seed's fall and return at the best γ, the cloned null's minus
-    the own null's, paired by seed (checked against scipy's paired t test and Holm by hand); the detectable
-    difference is where the paired test's power reaches 80%; the own null's held-out row sits beside the
-    cloned one's."""
+    """The same agents with another null: each side's best γ chosen on the sweep and scored on the fresh
+    episodes, each seed's fall and return there, the cloned null's minus the own null's, paired by seed
+    (checked against scipy's paired t test, on seeds matched by number, not by position); the detectable
+    difference is where the paired test's power reaches 80%; n/a where no seed differs."""
     import beyond_report
     from scipy import stats
 
+    def cloned(rows, episode_seed):
+        gain = {1.0: 0.0, 1.2: 0.1, 1.5: 0.05}  # the cloned null gains at 1.2 and keeps most of it at 1.5
+        return [{**r, "config": "ppo null=bc mujoco=2.3.7", "null_branch": "bc", "episode_seed": episode_seed,
+                 "return": r["return"] * (1.0 if r["eval_guidance"] == 1.0 else 1.5**2 / r["eval_guidance"] ** 2)
+                 + 40 * gain[r["eval_guidance"]] * r["seed"] ** 2} for r in rows]  # fmt: skip
+
     own = beyond_rows("Hopper-v4", "ppo", {1_000_000: [2000, 2100, 2200, 2300, 2400]}, gammas=(1.0, 1.2, 1.5))
-    steady = {1.0: 0.0, 1.2: 0.1, 1.5: 0.05}  # the cloned null gains at 1.2 and keeps most of it at 1.5
-    cloned = [{**r, "variant": "ppo", "config": "ppo null=bc mujoco=2.3.7", "null_branch": "bc",
-               "return": r["return"] * (1.0 if r["eval_guidance"] == 1.0 else 1.5 ** 2 / r["eval_guidance"] ** 2)
-               + 40 * steady[r["eval_guidance"]] * r["seed"]} for r in own]  # fmt: skip
+    own_fresh = beyond_rows("Hopper-v4", "ppo", {1_000_000: [2050, 2000, 2250, 2200, 2500]}, gammas=(1.0, 1.2, 1.5))
+    folder = tmp_path / "beyond" / beyond_report.BC_FOLDER
     write_rows(tmp_path / "table.csv", own)
-    write_rows(tmp_path / "beyond" / beyond_report.BC_FOLDER / "episodes.csv", cloned)
-    args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"),
-                              table_heldout=str(tmp_path / "none.csv"), discrete_table=str(tmp_path / "none.csv"),
-                              discrete_heldout=str(tmp_path / "none.csv"))  # fmt: skip
-    means, sets, heldout = beyond_report.read_bc(tmp_path / "beyond", args)
+    write_rows(folder / "episodes.csv", cloned(own, 10_000))
+    write_rows(folder / "heldout_fresh.csv", cloned(own_fresh[::-1], 20_000))  # rows in another order
+    write_rows(folder / "own_null_fresh.csv", own_fresh)
+    none = str(tmp_path / "none.csv")
+    args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"), table_heldout=none,
+                              discrete_table=none, discrete_heldout=none)  # fmt: skip
+    means, fresh, sets, heldout = beyond_report.read_bc(tmp_path / "beyond", args)
     assert sets == [("Hopper-v4", "ppo")] and not heldout
     values = []
-    lines = beyond_report.bc_section(means, sets, heldout, values)
+    lines = beyond_report.bc_section(means, fresh, sets, heldout, values)
     number = {(r["variant"], r["baseline"], r["quantity"]): r["value"] for r in values}
-    _, falls_own, returns_own = beyond_report.seed_falls(means, "Hopper-v4", "ppo")
-    _, falls_bc, returns_bc = beyond_report.seed_falls(means, "Hopper-v4", "ppo" + beyond_report.BC)
-    key = ("ppo" + beyond_report.BC, "ppo")
-    assert number[(*key, "fall difference (pts)")] == pytest.approx(100 * (np.mean(falls_bc) - np.mean(falls_own)))
-    assert number[(*key, "fall p")] == pytest.approx(stats.ttest_rel(falls_bc, falls_own).pvalue)
-    assert number[(*key, "return p")] == pytest.approx(stats.ttest_rel(returns_bc, returns_own).pvalue)
-    assert number[(*key, "fall p Holm")] == pytest.approx(number[(*key, "fall p")])  # a family of one
-    sd = np.std(np.subtract(returns_bc, returns_own), ddof=1)
-    critical = stats.t.ppf(0.975, 4)
-    power = stats.nct.sf(critical, 4, number[(*key, "return detectable")] * np.sqrt(5) / sd)
-    assert power == pytest.approx(0.8, abs=1e-6)
-    assert any("| Hopper-v4 | PPO | behaviour-cloned |" in line for line in lines)
-    assert (
-        number[("ppo", "question 3", "return at γ 1")]
-        == number[("ppo" + beyond_report.BC, "question 3", "return at γ 1")]
+    bc = "ppo" + beyond_report.BC
+    best_own, best_bc = number[("ppo", "question 3", "best γ")], number[(bc, "question 3", "best γ")]
+    at = lambda key, gamma: fresh[("Hopper-v4", key, 1_000_000, gamma)]
+    returns_bc, returns_own = at(bc, best_bc), at("ppo", best_own)
+    seeds = sorted(returns_own)
+    assert number[(bc, "ppo", "return p")] == pytest.approx(
+        stats.ttest_rel([returns_bc[s] for s in seeds], [returns_own[s] for s in seeds]).pvalue
     )
+    falls = lambda key, best: [(at(key, 1.5)[s] - at(key, best)[s]) / abs(at(key, best)[s]) for s in seeds]
+    fall_difference = np.subtract(falls(bc, best_bc), falls("ppo", best_own))
+    assert number[(bc, "ppo", "fall difference (pts)")] == pytest.approx(100 * fall_difference.mean())
+    assert number[(bc, "ppo", "fall p")] == pytest.approx(stats.ttest_1samp(fall_difference, 0.0).pvalue)
+    assert number[(bc, "ppo", "fall p Holm")] == pytest.approx(number[(bc, "ppo", "fall p")])  # a family of one
+    sd = np.std(np.subtract([returns_bc[s] for s in seeds], [returns_own[s] for s in seeds]), ddof=1)
+    power = stats.nct.sf(stats.t.ppf(0.975, 4), 4, number[(bc, "ppo", "return detectable")] * np.sqrt(5) / sd)
+    assert power == pytest.approx(0.8, abs=1e-6)
+    assert number[("", "question 3", "γ = 1 cells equal")] == 1
+    assert any("| Hopper-v4 | PPO | behaviour-cloned |" in line for line in lines)
+    assert beyond_report.paired_test({1: 1.0, 2: 2.0}, {1: 0.0, 2: 0.5}) is None  # two seeds: no test
+    assert beyond_report.paired_test({1: 1.0, 2: 1.0, 3: 1.0}, {1: 1.0, 2: 1.0, 3: 1.0}) is None  # no spread

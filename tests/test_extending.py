@@ -553,7 +553,8 @@ def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_origi
     configs = {row["run"]: row["config"] for row in rows}
     tanh = "pgg_g1.1_drop0.1 num_minibatches=4 num_steps=256 total_timesteps=768 update_epochs=2 mujoco=2.3.7"
     assert configs["tanh_s2"] == tanh
-    assert configs["fork_s1"] == configs["tanh_s2"].replace("drop0.1", f"drop0.1 script={fork}")
+    # The fork's label names its script and its new argument, at whatever value (here the default).
+    assert configs["fork_s1"] == tanh.replace("drop0.1", f"drop0.1 script={fork} null_mean_coef=0.0")
     assert len(files.read_csv(tmp_path / "named" / "summary.csv")) == 4  # two configurations x two γ, never pooled
     (evaluated,) = [r for r in files.read_csv(tmp_path / "named" / "evaluated_by.csv") if r["run"] == "fork_s1"]
     assert evaluated["evaluated_by"] == str(fork) and evaluated["same_script"] == "yes"
@@ -583,7 +584,7 @@ def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_u
     assert not torch.equal(default["model"]["actor_mean.0.weight"], ppo["model"]["actor_mean.0.weight"])  # ReLU
     rows = sweep_rows(tmp_path, "sweep", fork)
     configs = {row["run"]: row["config"] for row in rows}
-    assert "null_mean_coef=0.5" in configs["pulled_s1"] and "null_mean_coef" not in configs["default_s2"]
+    assert "null_mean_coef=0.5" in configs["pulled_s1"] and "null_mean_coef=0.0" in configs["default_s2"]
     assert len(set(configs.values())) == 3
     summary = files.read_csv(tmp_path / "sweep" / "summary.csv")
     assert {row["n_seeds"] for row in summary} == {"1"} and len(summary) == 6
@@ -742,3 +743,18 @@ def test_behaviour_cloning_by_the_null_branch_trains_it_at_guidance_one_and_rout
         moved = [p.grad is not None and p.grad.abs().sum() > 0 for p in actor.parameters()]
         assert all(moved) if actor_learns else not any(moved)
         assert agent.actor_logstd.grad is None if kind == "continuous" else True  # the policy's σ is not cloned
+
+
+def test_a_checkpoint_alone_names_no_file_outside_the_repositorys_top_level(tmp_path):
+    """A checkpoint is data: a recorded script with a folder in it (`../x.py`, `runs/x.py`), or one that is
+    no file at the repository's top level, is refused in one line, and nothing is imported."""
+    outside = tmp_path / "payload.py"
+    outside.write_text("raise SystemExit('imported')\n")
+    relative = str(Path("..") / outside.relative_to("/")) if outside.is_absolute() else str(outside)
+    for recorded in (str(outside), relative, "runs/payload.py", "payload.py", "../" * 12 + str(outside)[1:]):
+        with pytest.raises(scripts.ScriptError) as refused:
+            scripts.training_module({"action_space": "continuous", "script_path": recorded})
+        assert "--script" in str(refused.value) and "\n" not in str(refused.value)
+    # Named by the user, the same file is that user's choice: imported, and refused as no training script.
+    with pytest.raises(scripts.ScriptError, match="cannot import .*payload.py"):
+        scripts.training_module({"action_space": "continuous", "script_path": str(outside)}, (outside,))

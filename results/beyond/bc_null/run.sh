@@ -25,3 +25,9 @@ done
 cp runs/sweeps/bc_null_10000/episodes.csv "$out/episodes.csv"
 cp runs/sweeps/bc_null_20000/episodes.csv "$out/heldout_fresh.csv"
 python paper_study/heldout_gamma.py "$out/episodes.csv" "$out/heldout_fresh.csv" --null-branch bc --output "$out"
+# The same agents with their own null on the fresh episodes at every γ (the tables' fresh sweeps hold only
+# γ = 1 and the selected γ on some tasks): the other side of the report's fresh-episode tests.
+python eval_gamma_sweep.py results/continuous/agents/{Hopper,Walker2d,Humanoid}-v4__{ppo,pgg_g1.1}__s{1,2,3,4,5} \
+    results/discrete/agents/{CartPole,Acrobot}-v1__{ppo,pgg_g1.1}__s{1,2,3,4,5} --steps 500000 1000000 \
+    --eval-seed 20000 --workers "${WORKERS:-2}" --output runs/sweeps/bc_null_own_20000
+cp runs/sweeps/bc_null_own_20000/episodes.csv "$out/own_null_fresh.csv"
