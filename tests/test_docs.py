@@ -116,9 +116,9 @@ BEYOND_SOURCES = [
     (P, GOAL, "", "distance largest vs γ 1 (%)"), (P, PPO, "", "distance largest vs γ 1 (%)"),
     None,  # γ = 1.5
     (W, PPO + BC, PPO, "fall difference (pts)"), (W, PPO + BC, PPO, "fall p Holm"),
-    (U, PPO + BC, PPO, "fall difference (pts)"), (U, PPO + BC, PPO, "fall p Holm"), None,  # γ_train 1.1
+    (U, PPO + BC, PPO, "fall difference (pts)"), (U, PPO + BC, PPO, "fall p Holm"),
+    (U, PPO + BC, "question 3", "best γ"), None,  # γ_train 1.1
     (H, CON + BC, CON, "return difference at best γ"), (H, CON + BC, CON, "return p Holm"),
-    (U, CON + BC, CON, "return difference at best γ"), (U, CON + BC, CON, "return p Holm"),
 ]  # fmt: skip
 
 
