@@ -56,6 +56,9 @@ BASELINES = ("ppo", "pgg_g1.1")
 # The behaviour-cloned nulls of the tables' agents (pgg_utils/bc_null.py, results/beyond/bc_null/run.sh): their
 # folder, and the suffix that keys a fitted null's cells beside the same agents' own null in `means`.
 BC_FOLDER, BC = "bc_null", " null=bc"
+# The sets of the variant that clones the rollout's actions while it trains (results/beyond/bc_train/<task>).
+BC_TRAIN_FOLDER = "bc_train"
+CLONING_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--null-bc-coef" in flags}
 GOAL_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "{goal}" in flags}
 SCHEDULE_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--guidance-schedule" in flags}
 COLLAPSE_FRACTION = 0.5
@@ -195,7 +198,10 @@ def comparisons(means: dict, env: str, variant: str, baseline: str) -> tuple[lis
 def read_heldout(folder: Path, table_heldout: Path) -> dict:
     """{(env, variant, step): heldout row} from each task's heldout_gamma.csv and the table's."""
     out = {}
-    tasks = (path for path in sorted(folder.glob("*/heldout_gamma.csv")) if path.parent.name != BC_FOLDER)
+    tasks = [
+        *(path for path in sorted(folder.glob("*/heldout_gamma.csv")) if path.parent.name != BC_FOLDER),
+        *sorted(folder.glob(f"{BC_TRAIN_FOLDER}/*/heldout_gamma.csv")),
+    ]
     for path in [*([table_heldout] if table_heldout.exists() else []), *tasks]:
         with open(path, newline="") as f:
             for r in csv.DictReader(f):
@@ -282,8 +288,9 @@ def task_section(env: str, means: dict, variants: list[str], rows: list[dict], p
                 out.append("–")
         fell = [seed_list(collapsed(cells, every)) for every in (False, True)]
         lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + f" | {fell[0]} | {fell[1]} |")
-    lines += ["", (f"Each new variant against each baseline at γ = 1 (Welch's t test, Holm over the report's {len(rows)} "
-              "such tests; beside it the gap one test detects with 80% power at α = 0.05, before Holm, so a "
+    cloning = sum(r["variant"] in CLONING_VARIANTS for r in rows)
+    lines += ["", (f"Each new variant against each baseline at γ = 1 (Welch's t test, Holm over the report's {len(rows) - cloning} "
+              f"such tests of the schedules and goal nulls, and apart over the {cloning} of the cloning variant; beside it the gap one test detects with 80% power at α = 0.05, before Holm, so a "
               "non-significant row rules out less than it shows). γ = 1 is not the policy a schedule ending at "
               "γ_train 1.2 was trained toward: the held-out and γ-response tables below compare at other γ. Then, "
               "over every (step, eval γ) cell both sweeps hold: how many cells lie above and below the baseline "
@@ -395,13 +402,14 @@ def welch_of(ours: list[float], theirs: list[float]) -> dict:
             "detectable": detectable_gap(s1, n1, s2, n2, ALPHA)}  # fmt: skip
 
 
-def fall_tests(means: dict, variants_of: dict, gamma_one_p: list[float] = ()) -> list[dict]:
-    """Each schedule against each baseline, each side at its own best eval γ: the per-seed fall from it to the
-    largest γ, and the per-seed return at it; Welch's t, Holm over each kind's tests alone, and for the falls
-    also Holm over them with the report's γ = 1 tests (`gamma_one_p`), the family the verdict was drawn from."""
+def fall_tests(means: dict, variants_of: dict, gamma_one_p: list[float] = (), variants=SCHEDULE_VARIANTS) -> list[dict]:
+    """Each of `variants` (the schedules) against each baseline, each side at its own best eval γ: the per-seed
+    fall from it to the largest γ, and the per-seed return at it; Welch's t, Holm over each kind's tests alone,
+    and for the falls also Holm over them with the report's γ = 1 tests (`gamma_one_p`), the family the verdict
+    was drawn from."""
     rows = []
-    for env in scheduled_tasks(variants_of):
-        for variant in (v for v in variants_of[env] if v in SCHEDULE_VARIANTS):
+    for env in sorted(e for e, vs in variants_of.items() if set(variants) & set(vs)):
+        for variant in (v for v in variants_of[env] if v in variants):
             best, ours, our_returns = seed_falls(means, env, variant)
             for baseline in (b for b in BASELINES if b in variants_of[env]):
                 baseline_best, theirs, their_returns = seed_falls(means, env, baseline)
@@ -459,7 +467,7 @@ def glance_section(means: dict, variants_of: dict, distance: dict, gamma_one_p: 
                   ("| task | variant | γ = 1 | best γ: return | largest γ: return | largest vs best | fell at γ = 1 | "
                   "fell at its best γ |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
         for env in scheduled:
-            for variant in (v for v in variants_of[env] if v not in GOAL_VARIANTS):
+            for variant in (v for v in variants_of[env] if v not in GOAL_VARIANTS | CLONING_VARIANTS):
                 gammas, values = response_at_last_step(means, env, variant)
                 cells = cells_of(means, env, variant)
                 if 1.0 not in gammas or any(math.isnan(v) for v in values):
@@ -711,6 +719,38 @@ def bc_section(
     return [*lines, ""]
 
 
+def cloning_section(tests: list[dict], values_out: list[dict]) -> list[str]:
+    """Question 3's other comparison: the variant that clones the rollout's actions while it trains against the
+    constant γ_train 1.1, which isolates the cloning (the same γ_train), and against PPO; each side at its own
+    best eval γ at the last mark (Welch's t over seeds, distinct runs; Holm over these tests alone)."""
+    if not tests:
+        return []
+    lines = ["### Cloning while training", "",
+             ("The variant that clones the rollout's actions by the null branch while it trains (γ_train 1.1, "
+              "coefficient 0.1, the null embedding alone; results/beyond/bc_train) against the constant γ_train 1.1, "
+              "which isolates the cloning, and against PPO: each side at its own best eval γ at the last mark (chosen "
+              "on these episodes), each seed's fall from it to the largest γ and its return at it; Welch's t test "
+              f"(distinct runs), Holm over these {len(tests)} tests of each kind, the difference one test detects "
+              "with 80% power at α = 0.05, before Holm. Sets trained so far: "
+              f"{', '.join(sorted({t['env_id'] for t in tests}))}; its held-out γ is in the task's section."), "",
+             ("| task | baseline | best γ (baseline's) | fall | baseline's fall | difference | p (Holm) | detectable | "
+              "return | baseline's return | p (Holm) |"), "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for t in tests:
+        for quantity, value in (("fall (%)", 100 * t["fall"]), ("baseline's fall (%)", 100 * t["baseline_fall"]),
+                                ("fall difference (pts)", 100 * (t["fall"] - t["baseline_fall"])),
+                                ("fall p", t["p"]), ("fall p Holm", t["p_holm"]),
+                                ("fall detectable (pts)", 100 * t["detectable"]), ("return at best γ", t["return"]),
+                                ("baseline's return at its best γ", t["baseline_return"]),
+                                ("return at best γ p", t["return_p"]), ("return at best γ p Holm", t["return_p_holm"])):  # fmt: skip
+            record(values_out, t["env_id"], t["variant"], t["baseline"], quantity, value)
+        lines.append(f"| {t['env_id']} | {paper_name(t['baseline'])} | {t['best']:g} ({t['baseline_best']:g}) | "
+                     f"{pct(t['fall'])} | {pct(t['baseline_fall'])} | {points(t['fall'] - t['baseline_fall'])} | "
+                     f"{fmt_p(t['p'])} ({fmt_p(t['p_holm'])}) | {points(t['detectable'], sign=False)} | "
+                     f"{fmt(t['return'])} | {fmt(t['baseline_return'])} | {fmt_p(t['return_p'])} "
+                     f"({fmt_p(t['return_p_holm'])}) |")  # fmt: skip
+    return [*lines, ""]
+
+
 def bc_figure(means: dict, sets: list[tuple[str, str]], path: Path) -> None:
     """A panel per task: each set of agents' γ-response with its own null (solid) and the cloned one (dashed)."""
     envs = list(dict.fromkeys(env for env, _ in sets))
@@ -796,7 +836,8 @@ def distance_figure(distance: dict, variants_of: dict, path: Path) -> None:
 
 def report(args: Args) -> list[Path]:
     folder = Path(args.folder)
-    task_files = sorted(path for path in folder.glob("*/episodes.csv") if path.parent.name != BC_FOLDER)
+    task_files = sorted([*(path for path in folder.glob("*/episodes.csv") if path.parent.name != BC_FOLDER),
+                         *folder.glob(f"{BC_TRAIN_FOLDER}/*/episodes.csv")])  # fmt: skip
     if not task_files:
         raise InputError(f"no <task>/episodes.csv under {folder}")
     beyond = [r for path in task_files for r in read_rows(path)]
@@ -819,8 +860,11 @@ def report(args: Args) -> list[Path]:
             for baseline in (b for b in BASELINES if b in variants_of[env]):
                 found, pooled[(env, variant, baseline)] = comparisons(means, env, variant, baseline)
                 rows.extend(found)
-    for r, p in zip(rows, holm([r["p"] for r in rows])):
-        r["p_holm"] = p
+    cloning = [r for r in rows if r["variant"] in CLONING_VARIANTS]  # Question 3's family, apart from the others'
+    others = [r for r in rows if r["variant"] not in CLONING_VARIANTS]
+    for family in (others, cloning):
+        for r, p in zip(family, holm([r["p"] for r in family])):
+            r["p_holm"] = p
     if args.runs is not None:
         write_trajectories(Path(args.runs), folder / "guidance_trajectory.csv")
     values = []  # every number of the glance tables, the γ-response and γ_train tables and the pooled counts
@@ -833,11 +877,12 @@ def report(args: Args) -> list[Path]:
              (f"Generated by `python paper_study/beyond_report.py {args.folder} --table {args.table}` from the committed "
              "episode CSVs. Baselines of the paper's tasks come from the continuous table's runs (the same code "
              "class: the same algorithm trained with --compile, MuJoCo 2.3.7, on another CPU); Reacher-v4's are "
-             "trained here."), "", *glance_section(means, variants_of, distance, [r["p"] for r in rows], values)]  # fmt: skip
+             "trained here."), "", *glance_section(means, variants_of, distance, [r["p"] for r in others], values)]  # fmt: skip
     for env in envs:
         lines += task_section(env, means, variants_of[env], rows, pooled, heldout, distance, trajectories, values)
     bc_means, bc_fresh, bc_sets, bc_heldout = read_bc(folder, args)
     lines += bc_section(bc_means, bc_fresh, bc_sets, bc_heldout, values)
+    lines += cloning_section(fall_tests(means, variants_of, variants=CLONING_VARIANTS), values)
     written = [folder / "report.md", folder / "report.csv", folder / "report_values.csv", folder / "gamma_response.png"]
     if trajectories:
         written.append(folder / "guidance_trajectory.png")

@@ -91,6 +91,7 @@ def rounds_from(text: str, value: float) -> bool:
 H, W, U, P, R = "Hopper-v4", "Walker2d-v4", "Humanoid-v4", "Pusher-v4", "Reacher-v4"
 LIN, ADA, CON, PPO, GOAL = "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1", "ppo", "pgg_g1.1_goal"
 BC = " null=bc"  # a behaviour-cloned null's rows (paper_study/beyond_report.py)
+CLONING = "pgg_g1.1_bc0.1"  # the variant that clones while it trains
 FALL = "largest γ vs best (%)"
 BEYOND_SOURCES = [
     (H, LIN, "", "seeds"), None,  # 5 seeds; γ = 1.5
@@ -118,7 +119,8 @@ BEYOND_SOURCES = [
     (W, PPO + BC, PPO, "fall difference (pts)"), (W, PPO + BC, PPO, "fall p Holm"),
     (U, PPO + BC, PPO, "fall difference (pts)"), (U, PPO + BC, PPO, "fall p Holm"),
     (U, PPO + BC, "question 3", "best γ"), None,  # γ_train 1.1
-    (H, CON + BC, CON, "return difference at best γ"), (H, CON + BC, CON, "return p Holm"),
+    (H, CON + BC, CON, "return difference at best γ"), (H, CON + BC, CON, "return p Holm"), None,  # γ_train 1.1
+    (H, CLONING, CON, "fall p Holm"), (H, CLONING, CON, "return at best γ p Holm"),
 ]  # fmt: skip
 
 
