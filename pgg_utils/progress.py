@@ -49,7 +49,10 @@ class Progress:
         now = time.time()
         if now - self.last_line >= self.interval:  # the line is formatted only when it is printed
             self.last_line = now
-            print(f"{self.label}: {self.line(done, details)}", file=self.stream, flush=True)
+            # One write, line and newline together: print's two writes let a Ctrl-C between them leave the
+            # line open, and the interrupt's own line would then continue it.
+            self.stream.write(f"{self.label}: {self.line(done, details)}\n")
+            self.stream.flush()
 
     def close(self) -> None:
         if self.bar is not None:

@@ -21,8 +21,7 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from paper_study import stats
-from pgg_utils import files, identity, runs
+from pgg_utils import files, identity, pooling, runs
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 FORMAT_1 = FIXTURES / "cartpole_format1" / "checkpoints" / "step_000000512.pt"
@@ -47,7 +46,7 @@ def count_jobs(monkeypatch) -> list:
 
 def test_the_sweep_shares_the_packages_classes():
     """Callers catch pgg_utils' InputError, and plot_results reports the sweep's statistic."""
-    assert sweep.InputError is files.InputError and sweep.mean_ci95 is stats.mean_ci95
+    assert sweep.InputError is files.InputError and sweep.mean_ci95 is pooling.mean_ci95
 
 
 # --- damaged cells are evaluated again -----------------------------------------------------------------
