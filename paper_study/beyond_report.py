@@ -626,7 +626,7 @@ def bc_section(
               "isolate the unconditional branch: the same agents, the same episodes, another null. At γ = 1 the null "
               f"plays no part: in {identical} of the {len(sets)} sets every seed's γ = 1 return equals the table's. "
               "The other comparison the question asks for, a variant that clones the rollout's actions while it "
-              "trains against the constant γ_train 1.1, is not run yet."), "",
+              "trains against the constant γ_train 1.1, is the next section's, on the tasks trained so far."), "",
              ("γ-response at the agents' last mark (means over seeds; the best γ chosen on these episodes) and that γ "
               "scored on fresh episodes (seeds 20000+) against γ = 1 there, ± its 95% CI."), "",
              "| task | agents | null | γ = 1 | best γ: return | largest γ: return | largest vs best | held-out γ: fresh gain |",
