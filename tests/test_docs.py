@@ -120,8 +120,9 @@ BEYOND_SOURCES = [
     (U, PPO + BC, PPO, "fall difference (pts)"), (U, PPO + BC, PPO, "fall p Holm"),
     (U, PPO + BC, "question 3", "best γ"), None,  # γ_train 1.1
     (H, CON + BC, CON, "return difference at best γ"), (H, CON + BC, CON, "return p Holm"),
-    (W, CLONING, PPO, "fall difference (pts)"), (W, CLONING, PPO, "fall p Holm"), None,  # γ_train 1.1
-    (W, CLONING, CON, "fall difference (pts)"), (W, CLONING, CON, "fall p Holm"), (H, CLONING, CON, "fall p Holm"),
+    (W, CLONING, PPO, "fall difference (pts)"), (U, CLONING, PPO, "fall difference (pts)"),
+    (W, CLONING, PPO, "fall p Holm"), (U, CLONING, PPO, "fall p Holm"), None,  # γ_train 1.1
+    (U, CLONING, CON, "fall difference (pts)"), (U, CLONING, CON, "fall p Holm"),
 ]  # fmt: skip
 
 
