@@ -284,8 +284,7 @@ class Job:
     gamma: float
     settings: tuple  # (episodes, eval_seed, deterministic, uniform_null)
     stack: tuple  # evaluation_stack() of the sweep
-    script: Path  # the training script that evaluates the checkpoint (scripts.locate)
-    evaluator: str  # what else computes the cell: that script's sha1 and a custom task's code (evaluator_of)
+    evaluation: "Evaluation"  # the script that evaluates the checkpoint and the fingerprint of what computes the cell
 
 
 @dataclass
@@ -308,7 +307,7 @@ def run_job(job: Job) -> JobResult:
     episodes, eval_seed, deterministic, uniform_null = job.settings
     try:
         digest, ckpt = read_checkpoint(job.checkpoint)
-        agent, module, _ = scripts.load_agent(ckpt, job.checkpoint, (job.script,))
+        agent, module, _ = scripts.load_agent(ckpt, job.checkpoint, (job.evaluation.script,))
         fields = configuration_fields(ckpt)
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
@@ -613,8 +612,7 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
     of a cell that failed, and those whose bytes changed since `cells` was planned."""
     settings = settings_of(args)
     missing = [cell for cell in cells if cell not in finished]
-    jobs = [Job(checkpoint, gamma, settings, stack, evaluations[checkpoint].script, evaluations[checkpoint].evaluator)
-            for checkpoint, gamma in missing]  # fmt: skip
+    jobs = [Job(checkpoint, gamma, settings, stack, evaluations[checkpoint]) for checkpoint, gamma in missing]
     if not jobs:
         return set()
     progress = Progress(label="sweep", total=len(jobs), unit="cells", interval=0, stream=sys.stderr)
@@ -632,7 +630,9 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
             else:
                 # Named by the bytes that were evaluated. A checkpoint rewritten since the plan keeps its new
                 # cell for a later sweep; this sweep reports none of its cells (they could mix two files).
-                path = cell_path(output, job.checkpoint, job.gamma, settings, result.digest, stack, job.evaluator)
+                path = cell_path(
+                    output, job.checkpoint, job.gamma, settings, result.digest, stack, job.evaluation.evaluator
+                )
                 rows = write_cell(path, result.rows)
                 if path == cells[(job.checkpoint, job.gamma)]:
                     finished[(job.checkpoint, job.gamma)] = rows

@@ -409,18 +409,6 @@ def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
 # --- training curves (--runs) ---------------------------------------------------------------------
 
 
-def last_checkpoint_of(run_dir: Path) -> dict | None:
-    """A run's last readable checkpoint (its record of what trained it), or None."""
-    from pgg_utils import runs  # torch: only where --runs is given
-
-    for path in reversed(runs.checkpoints_of(run_dir)):
-        try:
-            return runs.read_checkpoint_file(path)
-        except ValueError:
-            continue
-    return None
-
-
 def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     """({(env, variant, series): [(steps, returns) per seed]}, [(env, run directory, why) per run left
     out]): the episodic training returns (TensorBoard charts/episodic_return) of the runs under
@@ -438,7 +426,7 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     found, left_out = [], []  # (configuration, seed, steps, returns, run directory); (env, run directory, why)
     for args_file in run_args_files(run_paths):
         run_dir = args_file.parent
-        ckpt = last_checkpoint_of(run_dir)
+        ckpt = run_records.last_readable(run_dir)[1]
         if error := run_records.record_error(run_dir, ckpt):
             raise InputError(error)
         run_args = ckpt["args"] if ckpt else json.loads(args_file.read_text())

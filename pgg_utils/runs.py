@@ -514,6 +514,18 @@ def read_args_json(run_dir: Path) -> dict | None:
     return recorded
 
 
+def last_readable(run_dir: Path) -> tuple[Path | None, dict | None, list[tuple[Path, str]]]:
+    """(the run's last checkpoint that loads, its dict, [(each later one that does not, why)]). Reads, renames
+    nothing: the one walk back from the newest checkpoint that resume, the records' check and the curves share."""
+    unreadable = []
+    for path in reversed(checkpoints_of(run_dir)):
+        try:
+            return path, read_checkpoint_file(path), unreadable
+        except ValueError as e:
+            unreadable.append((path, str(e)))
+    return None, None, unreadable
+
+
 def record_error(run_dir: Path, ckpt: dict | None = None) -> str | None:
     """Why a run's two records disagree, its args.json and its last readable checkpoint (`ckpt`, read by
     the caller; None: the directory's last readable one), or None. The training arguments both name
@@ -525,12 +537,7 @@ def record_error(run_dir: Path, ckpt: dict | None = None) -> str | None:
     if recorded is None:
         return None
     if ckpt is None:
-        for path in reversed(checkpoints_of(run_dir)):
-            try:
-                ckpt = read_checkpoint_file(path)
-                break
-            except ValueError:
-                continue
+        ckpt = last_readable(run_dir)[1]
     if ckpt is None:
         return None
     saved = as_json(ckpt.get("args", {}))
@@ -640,16 +647,10 @@ class Run:
                               "choose another --run-name, or pass --overwrite to replace them")  # fmt: skip
 
     def last_readable_checkpoint(self) -> tuple[Path | None, list[tuple[Path, str]]]:
-        """(the last checkpoint that loads, [(each later one that does not, why)]). Reads, renames nothing.
-        The loaded dict is kept for the resume."""
-        unreadable = []
-        for path in reversed(checkpoints_of(self.dir)):
-            try:
-                self.loaded = read_checkpoint_file(path)
-                return path, unreadable
-            except ValueError as e:
-                unreadable.append((path, str(e)))
-        return None, unreadable
+        """(the last checkpoint that loads, [(each later one that does not, why)]) (last_readable). Reads,
+        renames nothing. The loaded dict is kept for the resume."""
+        path, self.loaded, unreadable = last_readable(self.dir)
+        return path, unreadable
 
     def check_continuable(self, latest: Path) -> None:
         """Raises RunDirError unless this run may continue the one whose last readable checkpoint is
