@@ -1,0 +1,51 @@
+"""A checkpoint's contract with its task: the observation and action spaces it was trained on.
+
+Training records `describe(...)` in every checkpoint (key `task_spaces`); whatever evaluates the checkpoint
+compares it with the task it is handed (`mismatch`), so a task whose spaces changed since training is named in
+one line instead of being evaluated with plausible, wrong numbers. Checkpoints saved before the contract was
+recorded are checked on the sizes they hold (obs_dim, and n_actions or action_dim)."""
+
+import gymnasium as gym
+import numpy as np
+
+
+def describe(observation_space: gym.Space, action_space: gym.Space) -> dict:
+    """The spaces as plain data: the observation's shape; a Discrete action's n and start, a Box action's shape
+    and bounds."""
+    if isinstance(action_space, gym.spaces.Discrete):
+        action = {"type": "Discrete", "n": int(action_space.n), "start": int(action_space.start)}
+    elif isinstance(action_space, gym.spaces.Box):
+        action = {
+            "type": "Box",
+            "shape": list(action_space.shape),
+            "low": np.asarray(action_space.low, np.float64).ravel().tolist(),
+            "high": np.asarray(action_space.high, np.float64).ravel().tolist(),
+        }
+    else:
+        action = {"type": type(action_space).__name__}
+    return {"observation": {"shape": list(observation_space.shape or ())}, "action": action}
+
+
+def recorded(ckpt: dict) -> dict:
+    """The checkpoint's contract, from `task_spaces` or, for an older checkpoint, from the sizes it holds
+    (fields it does not know are left out, so they are not compared)."""
+    if "task_spaces" in ckpt:
+        return ckpt["task_spaces"]
+    action = {"type": "Discrete", "n": ckpt["n_actions"]} if "n_actions" in ckpt else {"type": "Box"}
+    if "action_dim" in ckpt:
+        action["shape"] = [ckpt["action_dim"]]
+    return {"observation": {"shape": [ckpt["obs_dim"]]} if "obs_dim" in ckpt else {}, "action": action}
+
+
+def mismatch(contract: dict, observation_space: gym.Space, action_space: gym.Space) -> str | None:
+    """One line naming how the task's spaces differ from those a checkpoint was trained on, or None."""
+    now = describe(observation_space, action_space)
+    then_obs, then_act = contract.get("observation", {}), contract.get("action", {})
+    if "shape" in then_obs and list(then_obs["shape"]) != now["observation"]["shape"]:
+        return f"observation shape {tuple(then_obs['shape'])} in training, {tuple(now['observation']['shape'])} now"
+    if then_act.get("type") != now["action"]["type"]:
+        return f"action space {then_act.get('type')} in training, {now['action']['type']} now"
+    for field in ("n", "start", "shape", "low", "high"):
+        if field in then_act and list(np.atleast_1d(then_act[field])) != list(np.atleast_1d(now["action"][field])):
+            return f"action {field} {then_act[field]} in training, {now['action'][field]} now"
+    return None
