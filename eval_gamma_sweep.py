@@ -71,9 +71,11 @@ import numpy as np
 import torch
 import tyro
 
-from pgg_utils import runs, scripts
+from pgg_utils import scripts
 from pgg_utils.arguments import DEFAULT_GAMMAS, guidance_error
 from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
+from pgg_utils.checkpoints import find_checkpoints, non_finite, read_checkpoint_file
+from pgg_utils.checks import video_error
 from pgg_utils.fast import MIN_FORWARD_ROWS, standard_gumbel
 from pgg_utils.files import (
     InputError,
@@ -141,10 +143,10 @@ def read_checkpoint(path: Path) -> tuple[str, dict]:
         data = Path(path).read_bytes()
     except OSError as e:
         raise ValueError(f"unreadable checkpoint ({e.strerror or e})") from None
-    ckpt = runs.read_checkpoint_file(io.BytesIO(data))
+    ckpt = read_checkpoint_file(io.BytesIO(data))
     if ckpt.get("action_space") not in scripts.ORIGINALS:
         raise ValueError("not a PGG checkpoint (no known action_space field)")
-    if bad := runs.non_finite(ckpt["model"]):
+    if bad := non_finite(ckpt["model"]):
         raise ValueError(f"non-finite weights or statistics ({', '.join(bad[:3])}); not evaluated")
     return hashlib.sha1(data).hexdigest(), ckpt
 
@@ -545,7 +547,7 @@ def sweep(args: Args) -> Path:
     """Runs (or resumes) the sweep; returns the output directory."""
     check_args(args)
     output, skipped = Path(args.output), []
-    checkpoints = runs.find_checkpoints(args.paths, args.steps, skipped)
+    checkpoints = find_checkpoints(args.paths, args.steps, skipped)
     lock = claim_output(output)
     threads = torch.get_num_threads()
     try:
@@ -676,7 +678,7 @@ def record_videos(args: Args) -> list[Path]:
     """--video: one video per γ of one checkpoint, the same episode (seed and noise) in each, and all
     of them side by side with γ and the return written on each panel (shorter episodes hold their
     last frame). Returns the files written."""
-    checkpoints = runs.find_checkpoints(args.paths, args.steps)
+    checkpoints = find_checkpoints(args.paths, args.steps)
     if len(checkpoints) != 1:
         raise InputError(f"--video records one checkpoint; {len(checkpoints)} found "
                          "(name a checkpoint file, or narrow with --steps)")  # fmt: skip
@@ -688,7 +690,7 @@ def record_videos(args: Args) -> list[Path]:
         probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
     except Exception as e:
         raise InputError(f"cannot make environment {ckpt['env_id']!r}: {e}") from None
-    error = runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
+    error = video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30
     probe.close()
     if error:

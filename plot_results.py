@@ -418,16 +418,16 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     name. Only whole runs are drawn: a run whose events hold no episodic returns (missing or damaged) or
     end before its total_timesteps (cut or damaged events, or an unfinished run), or that has no readable
     checkpoint, is left out and named (incomplete_run); one whose args.json disagrees with its
-    checkpoints is refused (runs.record_error)."""
+    checkpoints is refused (rundir.record_error)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from pgg_utils import runs as run_records  # torch: only where --runs is given
+    from pgg_utils import checkpoints, rundir  # torch: only where --runs is given
 
     found, left_out = [], []  # (configuration, seed, steps, returns, run directory); (env, run directory, why)
     for args_file in run_args_files(run_paths):
         run_dir = args_file.parent
-        ckpt = run_records.last_readable(run_dir)[1]
-        if error := run_records.record_error(run_dir, ckpt):
+        ckpt = checkpoints.last_readable(run_dir)[1]
+        if error := rundir.record_error(run_dir, ckpt):
             raise InputError(error)
         run_args = ckpt["args"] if ckpt else json.loads(args_file.read_text())
         # A resumed run's events overlap the first session's past its checkpoint: the reader drops them,
@@ -466,7 +466,7 @@ def incomplete_run(run_dir: Path, run_args: dict, accumulator) -> str | None:
     """Why a run's TensorBoard events cannot be drawn as a whole run, or None where they can: they hold
     no episodic return, or they end (the last step of any scalar; every training iteration logs its
     losses at its global step) before the run's total_timesteps or its last checkpoint."""
-    from pgg_utils.runs import checkpoint_step, checkpoints_of  # torch: only where --runs is given
+    from pgg_utils.checkpoints import checkpoint_step, checkpoints_of  # torch: only where --runs is given
 
     tags = accumulator.Tags()["scalars"]
     if "charts/episodic_return" not in tags:

@@ -35,7 +35,7 @@ import torch
 import tyro
 from torch import nn
 
-from pgg_utils import runs
+from pgg_utils import checkpoints, runs, scripts, training_state
 from pgg_utils.arguments import RunArgs, acting_error
 from pgg_utils.fast import (
     evaluation_forward,
@@ -624,7 +624,7 @@ def train(args: Args, run: runs.Run) -> None:
     mid-episode, the next observation and every RNG state."""
     resumed = run.checkpoint_to_resume()
     writer = run.open_writer(resumed)
-    runs.seed_everything(args)
+    training_state.seed_everything(args)
 
     envs = make_vector_env(
         args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
@@ -693,7 +693,7 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
+                resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
         envs.close()
@@ -712,9 +712,9 @@ def checkpoint_shapes(envs) -> dict:
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    runs.require_own(ckpt, ACTION_SPACE, __file__, source)
-    runs.require_finite(ckpt, source)
-    low, high = runs.action_bounds(ckpt)
+    scripts.require_own(ckpt, ACTION_SPACE, __file__, source)
+    checkpoints.require_finite(ckpt, source)
+    low, high = checkpoints.action_bounds(ckpt)
     agent = make_agent(ckpt["args"], {**ckpt, "action_low": low, "action_high": high})
     agent.load_state_dict(ckpt["model"])
     return agent.eval()
@@ -722,7 +722,7 @@ def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agen
 
 def load_checkpoint(path) -> tuple[Agent, dict]:
     """(agent in eval mode, normalisation statistics included; the checkpoint dict) from a file."""
-    ckpt = runs.read_checkpoint_file(path)
+    ckpt = checkpoints.read_checkpoint_file(path)
     return agent_from_checkpoint(ckpt, path), ckpt
 
 

@@ -33,7 +33,7 @@ import torch
 import tyro
 from torch import nn
 
-from pgg_utils import runs
+from pgg_utils import checkpoints, runs, scripts, training_state
 from pgg_utils.arguments import RunArgs, acting_error
 from pgg_utils.fast import (
     evaluation_forward,
@@ -484,7 +484,7 @@ def train(args: Args, run: runs.Run) -> None:
     mid-episode, the next observation and every RNG state."""
     resumed = run.checkpoint_to_resume()
     writer = run.open_writer(resumed)
-    runs.seed_everything(args)
+    training_state.seed_everything(args)
 
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
     obs_dim = envs.single_observation_space.shape[0]
@@ -550,7 +550,7 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
-                resume = runs.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
+                resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:
         envs.close()
@@ -563,8 +563,8 @@ def checkpoint_shapes(envs) -> dict:
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
     """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    runs.require_own(ckpt, ACTION_SPACE, __file__, source)
-    runs.require_finite(ckpt, source)
+    scripts.require_own(ckpt, ACTION_SPACE, __file__, source)
+    checkpoints.require_finite(ckpt, source)
     agent = make_agent(ckpt["args"], ckpt)
     agent.load_state_dict(ckpt["model"])
     return agent.eval()
@@ -572,7 +572,7 @@ def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agen
 
 def load_checkpoint(path) -> tuple[Agent, dict]:
     """(agent in eval mode, the checkpoint dict) from a checkpoint file."""
-    ckpt = runs.read_checkpoint_file(path)
+    ckpt = checkpoints.read_checkpoint_file(path)
     return agent_from_checkpoint(ckpt, path), ckpt
 
 

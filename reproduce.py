@@ -41,7 +41,7 @@ import tyro
 import eval_gamma_sweep
 import plot_results
 from paper_study import paper
-from pgg_utils import processes, runs, scripts
+from pgg_utils import checkpoints, checks, processes, rundir, scripts
 from pgg_utils.arguments import env_id_in_path, guidance_error
 from pgg_utils.files import (
     RECORD,
@@ -160,7 +160,7 @@ def argument_error(args: Args) -> str | None:
             kind = paper.action_kind(env_id)
         except ValueError as e:
             return f"--envs: {e}"
-        if error := runs.env_error(env_id, kind):
+        if error := checks.env_error(env_id, kind):
             return f"--envs: {error}"
         for variant in chosen.variants:
             try:
@@ -197,7 +197,7 @@ class RunSpec:
     def final_checkpoint(self) -> Path:
         kind = paper.action_kind(self.env_id)
         total = scripts.original(kind).Args().total_timesteps if self.total_timesteps is None else self.total_timesteps
-        return runs.checkpoint_path(self.run_dir, total)
+        return checkpoints.checkpoint_path(self.run_dir, total)
 
     @property
     def log(self) -> Path:
@@ -205,8 +205,8 @@ class RunSpec:
 
     def last_step(self) -> int | None:
         """The step of the run's last checkpoint; None where it has none (nothing to resume or sweep)."""
-        latest = runs.latest_checkpoint(self.run_dir)
-        return None if latest is None else runs.checkpoint_step(latest)
+        latest = checkpoints.latest_checkpoint(self.run_dir)
+        return None if latest is None else checkpoints.checkpoint_step(latest)
 
     def command(self) -> list[str]:
         cmd = [sys.executable, scripts.original(paper.action_kind(self.env_id)).__file__, "--env-id", self.env_id,
@@ -363,16 +363,16 @@ def other_arguments(spec: RunSpec) -> str | None:
     """`name (total_timesteps 10 -> 2048)` where the run's last checkpoint holds other training arguments
     than this grid gives it (a run of another grid, which its training script refuses to continue, and
     which the sweep must not take for this grid's); None otherwise, or where it has none to read."""
-    latest = runs.latest_checkpoint(spec.run_dir)
+    latest = checkpoints.latest_checkpoint(spec.run_dir)
     if latest is None:
         return None
     try:
-        recorded = runs.read_checkpoint_file(latest).get("args", {})
+        recorded = checkpoints.read_checkpoint_file(latest).get("args", {})
     except ValueError:  # the sweep lists it in skipped.csv
         return None
     module = scripts.original(paper.action_kind(spec.env_id))
     wanted = tyro.cli(module.Args, args=spec.command()[2:])  # the arguments the run's command gives it
-    differing = runs.differing_arguments(recorded, asdict(wanted), asdict(module.Args()))
+    differing = rundir.differing_arguments(recorded, asdict(wanted), asdict(module.Args()))
     return f"{spec.name} ({', '.join(differing)})" if differing else None
 
 
@@ -467,10 +467,10 @@ def export_agents(specs: list[RunSpec], folder: Path) -> Path:
     readme = folder / "README.md"
     rows = {name: row for name, row in readme_rows(readme).items() if (folder / name).is_dir()}
     for spec in specs:
-        checkpoints = runs.checkpoints_of(spec.run_dir)
-        for checkpoint in checkpoints:
-            runs.export_agent(checkpoint, folder / spec.name / "checkpoints" / checkpoint.name)
-        steps = ", ".join(f"{runs.checkpoint_step(c):,}" for c in checkpoints)
+        saved = checkpoints.checkpoints_of(spec.run_dir)
+        for checkpoint in saved:
+            checkpoints.export_agent(checkpoint, folder / spec.name / "checkpoints" / checkpoint.name)
+        steps = ", ".join(f"{checkpoints.checkpoint_step(c):,}" for c in saved)
         command = " ".join(["python", Path(spec.command()[1]).name, *spec.command()[2:]])
         rows[spec.name] = f"| {spec.name} | {spec.env_id} | {spec.variant} | {spec.seed} | {steps} | `{command}` |"
     write_atomic(readme, "\n".join([

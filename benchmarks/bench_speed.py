@@ -49,7 +49,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils.runs import latest_checkpoint, train_in_process
+from pgg_utils.checkpoints import latest_checkpoint
+from pgg_utils.runs import train_in_process
 
 CLEANRL_SPS = {"CartPole-v1": (3400, 4000), "Hopper-v4": (780, 780)}
 CLEANRL_SCRIPTS = {"CartPole-v1": "ppo.py", "Hopper-v4": "ppo_continuous_action.py"}

@@ -19,7 +19,7 @@ import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import reproduce
-from pgg_utils import runs
+from pgg_utils import checkpoints
 from pgg_utils.files import InputError, one_line_errors
 from pgg_utils.identity import variant_id
 
@@ -34,7 +34,7 @@ class Args:
 
 def read(checkpoint: Path) -> dict:
     try:
-        return runs.read_checkpoint_file(checkpoint)
+        return checkpoints.read_checkpoint_file(checkpoint)
     except ValueError as e:
         raise InputError(f"{checkpoint}: {e}") from None
 
@@ -50,7 +50,7 @@ def compare_weights(first: Path, second: Path) -> tuple[int, int, float]:
 
 def retrain(agent: Path, root: Path) -> Path:
     """Trains the agent's run again under `root`; returns the new run's directory."""
-    shipped = runs.checkpoints_of(agent)
+    shipped = checkpoints.checkpoints_of(agent)
     if not shipped:
         raise InputError(f"{agent} holds no checkpoints/step_*.pt")
     args = read(shipped[-1])["args"]
@@ -69,9 +69,9 @@ def main() -> None:
     agent = Path(args.agent)
     with one_line_errors():
         retrained = retrain(agent, Path(args.root))
-        print(f"this CPU: {runs.machine()}")
+        print(f"this CPU: {checkpoints.machine()}")
         same = True
-        for checkpoint in runs.checkpoints_of(agent):
+        for checkpoint in checkpoints.checkpoints_of(agent):
             equal, total, largest = compare_weights(checkpoint, retrained / "checkpoints" / checkpoint.name)
             same &= equal == total
             print(f"{checkpoint.name}: {equal} of {total} tensors bit-identical, largest |difference| {largest:.3g}")

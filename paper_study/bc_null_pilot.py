@@ -15,11 +15,11 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from pgg_utils import bc_null, runs, scripts
+from pgg_utils import bc_null, checkpoints, scripts
 
 torch.set_num_threads(1)
 for path in sys.argv[1:]:
-    ckpt = runs.read_checkpoint_file(path)
+    ckpt = checkpoints.read_checkpoint_file(path)
     agent, module, _ = scripts.load_agent(ckpt, path)
     print(path)
     fits = {}

@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from pgg_utils import bc_null, runs, scripts
+from pgg_utils import bc_null, checkpoints, scripts
 
 
 def main() -> None:
@@ -28,8 +28,8 @@ def main() -> None:
     print("| run | null_bc_coef | route | " + " | ".join(f"γ = {g:g}" for g in gammas) + " | reach (σ) |")
     print("|---|---|---|" + "---|" * (len(gammas) + 1))
     for run_dir in sorted(p for p in run_root.iterdir() if p.is_dir()):
-        path = runs.checkpoints_of(run_dir)[-1]
-        ckpt = runs.read_checkpoint_file(path)
+        path = checkpoints.checkpoints_of(run_dir)[-1]
+        ckpt = checkpoints.read_checkpoint_file(path)
         agent, module, _ = scripts.load_agent(ckpt, path)
         actions = bc_null.own_episodes(agent, ckpt, module.make_env(ckpt["env_id"]), 20, 30_000)
         reach = bc_null.reach(agent, ckpt["action_space"], agent.null_obs.detach(), actions)

@@ -21,7 +21,7 @@ import tyro
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 from paper_study.paper import PAPER_GAMMAS
-from pgg_utils import runs
+from pgg_utils import checkpoints
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
 from pgg_utils.identity import variant_id
 
@@ -76,7 +76,7 @@ def main() -> None:
             print(f"note: {missing} does not exist; left out", file=sys.stderr)
         if not present:
             raise InputError(f"none of {', '.join(args.paths)} exists")
-        for path in runs.find_checkpoints(present, args.steps):
+        for path in checkpoints.find_checkpoints(present, args.steps):
             try:
                 agent, ckpt = sweep.load_any_checkpoint(path)
             except ValueError as e:  # unreadable, non-finite, or its script not found: one line, the rest measured

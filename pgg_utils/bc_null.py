@@ -23,7 +23,7 @@ import numpy as np
 import torch
 import tyro
 
-from pgg_utils import runs, scripts
+from pgg_utils import checkpoints, scripts
 from pgg_utils.files import InputError, one_line_errors, write_atomic
 
 BC_FIT = "behaviour cloning"
@@ -122,7 +122,7 @@ def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rat
 
 def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
     """The checkpoint of `path` with its null embedding behaviour-cloned, and the fit recorded."""
-    ckpt = runs.read_checkpoint_file(path)
+    ckpt = checkpoints.read_checkpoint_file(path)
     if ckpt.get("null_fit"):
         raise ValueError("already holds a fitted null branch")
     if ckpt["args"].get("null_dims") is not None:
@@ -146,7 +146,7 @@ def main() -> None:
             raise InputError("--episodes, --fit-steps and --learning-rate must be positive")
         torch.set_num_threads(1)
         given, written = tuple(Path(p).resolve() for p in args.script), 0
-        for path in runs.find_checkpoints(args.paths, args.steps):
+        for path in checkpoints.find_checkpoints(args.paths, args.steps):
             destination = Path(args.output) / f"{path.parent.parent.name}__bcnull" / "checkpoints" / path.name
             if destination.exists():
                 print(f"{destination} exists; kept", file=sys.stderr)
@@ -156,7 +156,7 @@ def main() -> None:
             except ValueError as e:
                 print(f"skipped {path}: {e}", file=sys.stderr)
                 continue
-            write_atomic(destination, runs.checkpoint_bytes(ckpt))
+            write_atomic(destination, checkpoints.checkpoint_bytes(ckpt))
             fit = ckpt["null_fit"]
             print(f"{destination}: {fit['actions']} actions, NLL {fit['nll']:.4f}", file=sys.stderr)
             written += 1

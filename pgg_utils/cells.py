@@ -7,7 +7,7 @@ import hashlib
 import json
 from pathlib import Path
 
-from pgg_utils import runs
+from pgg_utils import checkpoints
 from pgg_utils.files import InputError, read_csv, write_csv_atomic
 
 # Part of every cell's identity; raised when a fix changes what a cell evaluates to or holds, so that a
@@ -29,7 +29,7 @@ CELL_COLUMNS = [*EPISODE_COLUMNS, "checksum"]  # a cell file's: each row proves 
 
 def evaluation_stack() -> tuple[str, ...]:
     """This process's versions of the STACK_COLUMNS packages, in that order ("none" where one is not installed)."""
-    versions = runs.package_versions()
+    versions = checkpoints.package_versions()
     return tuple(versions[package] or "none" for package in STACK_COLUMNS)
 
 

@@ -11,8 +11,11 @@ import functools
 import hashlib
 import importlib.util
 import inspect
+import subprocess
 import sys
 from pathlib import Path
+
+from pgg_utils.checkpoints import READABLE_FORMAT_VERSIONS, read_checkpoint_file
 
 # The folder that holds the training scripts beside this package: the checkout, or site-packages.
 REPOSITORY = Path(__file__).resolve().parent.parent
@@ -148,7 +151,38 @@ def task_sources(env_id: str, env) -> dict[str, str]:
 def load_checkpoint(path, given: tuple[Path, ...] = ()):
     """(agent in eval mode, checkpoint dict) of a checkpoint file of any training script, the agent
     built by the script that trained it (locate). ValueError with one line where that cannot be done."""
-    from pgg_utils.runs import read_checkpoint_file
-
     ckpt = read_checkpoint_file(path)
     return load_agent(ckpt, path, given)[0], ckpt
+
+
+def code_revision(script: Path) -> dict:
+    """The training code of a run, the script and this package: the git commit of its checkout where
+    there is one (and whether those files differ from it; None where git cannot tell), and always their
+    sha1, and the script's own (`script_sha1`), which a sweep compares with the file that evaluates the run.
+    Taken when the run starts, before a checkout can move under it."""
+    files = [Path(script).resolve(), *sorted(Path(__file__).resolve().parent.glob("*.py"))]
+    digest = hashlib.sha1(b"".join(f.read_bytes() for f in files)).hexdigest()
+    commit = modified = None
+    try:
+        git = ["git", "-C", str(files[0].parent)]
+        head = subprocess.run([*git, "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
+        commit = head.stdout.strip() if head.returncode == 0 else None
+        if commit:
+            status = subprocess.run(
+                [*git, "status", "--porcelain", "--", *map(str, files)], capture_output=True, text=True, timeout=10
+            )
+            modified = bool(status.stdout.strip()) if status.returncode == 0 else None
+    except (OSError, subprocess.SubprocessError):  # no git
+        commit = None
+    return {"commit": commit, "modified": modified, "sha1": digest, "files": [f.name for f in files],
+            "script_sha1": file_sha1(files[0])}  # fmt: skip
+
+
+def require_own(ckpt: dict, kind: str, script: str | Path, source: str | Path = "checkpoint") -> None:
+    """ValueError unless `ckpt` is a checkpoint of a readable format trained by `script` (a script of
+    `kind` actions, discrete/continuous), or by a script of its file name: a fork's `Agent` is its own."""
+    if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != kind:
+        raise ValueError(f"{source} is not a {kind} PGG checkpoint of format {READABLE_FORMAT_VERSIONS}")
+    if Path(script_name(ckpt)).name != Path(script).name:
+        raise ValueError(f"{source} was trained by {script_name(ckpt)}, not {Path(script).name}: load it with "
+                         "its own script's load_checkpoint, or pgg_utils.scripts.load_checkpoint")  # fmt: skip

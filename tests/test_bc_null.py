@@ -11,7 +11,7 @@ from conftest import small_args, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import bc_null, files, identity, runs
+from pgg_utils import bc_null, checkpoints, files, identity
 
 
 def test_the_fit_moves_only_the_null_embedding_to_the_actions_maximum_likelihood():
@@ -41,15 +41,15 @@ def test_the_fit_moves_only_the_null_embedding_to_the_actions_maximum_likelihood
 
 def test_a_fitted_null_is_swept_as_its_own_configuration_beside_its_source(tmp_path):
     run_dir = train(ppo_pgg_discrete, small_args("discrete", tmp_path / "runs", guidance=1.1, cond_dropout=0.0))
-    source = runs.checkpoint_path(run_dir, 1536)
+    source = checkpoints.checkpoint_path(run_dir, 1536)
     args = bc_null.Args(paths=(str(source),), output=str(tmp_path / "runs" / "bc"), episodes=3)
     fitted = bc_null.fitted_checkpoint(source, args, ())
     assert fitted["null_fit"]["method"] == "behaviour cloning" and fitted["null_fit"]["episodes"] == 3
-    assert not torch.equal(fitted["model"]["null_obs"], runs.read_checkpoint_file(source)["model"]["null_obs"])
+    assert not torch.equal(fitted["model"]["null_obs"], checkpoints.read_checkpoint_file(source)["model"]["null_obs"])
     assert identity.config_label(fitted).endswith("null=bc num_steps=64 total_timesteps=1536")
     destination = tmp_path / "runs" / "bc" / "fitted__bcnull" / "checkpoints" / source.name
     destination.parent.mkdir(parents=True)
-    destination.write_bytes(runs.checkpoint_bytes(fitted))
+    destination.write_bytes(checkpoints.checkpoint_bytes(fitted))
     with pytest.raises(ValueError, match="already holds a fitted null branch"):
         bc_null.fitted_checkpoint(destination, args, ())
     sweep.sweep(sweep.Args(paths=(str(tmp_path / "runs"),), output=str(tmp_path / "sweep"), gammas=(1.0, 2.0),
@@ -62,4 +62,4 @@ def test_a_partial_null_is_refused(tmp_path):
     args = dataclasses.replace(small_args("continuous", tmp_path / "runs"), env_id="Reacher-v4", null_dims=(4, 5))
     run_dir = train(ppo_pgg_continuous, args)
     with pytest.raises(ValueError, match="replaces some observation dimensions only"):
-        bc_null.fitted_checkpoint(runs.checkpoint_path(run_dir, 768), bc_null.Args(paths=()), ())
+        bc_null.fitted_checkpoint(checkpoints.checkpoint_path(run_dir, 768), bc_null.Args(paths=()), ())

@@ -10,7 +10,7 @@ import torch
 from conftest import ROOT
 
 import ppo_pgg_discrete as pgg
-from pgg_utils import runs
+from pgg_utils import checkpoints, runs
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 sys.path.insert(0, str(ROOT / "paper_study"))
@@ -155,7 +155,7 @@ def test_same_training_cpu_tells_bit_identical_weights_from_a_difference_of_one_
     import same_training_cpu
 
     shipped = ROOT / "tests" / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
-    ckpt = runs.read_checkpoint_file(shipped)
+    ckpt = checkpoints.read_checkpoint_file(shipped)
     total = len(ckpt["model"])
     assert same_training_cpu.compare_weights(shipped, shipped) == (total, total, 0.0)
     weight = ckpt["model"]["actor.0.weight"]

@@ -12,7 +12,7 @@ from torch.distributions import Normal
 
 import ppo_pgg_continuous as pgg
 from paper_study.paper import PAPER_ENVS
-from pgg_utils import runs
+from pgg_utils import checkpoints, checks
 from pgg_utils.guidance import uses_null_branch
 
 PAPER_TASKS = PAPER_ENVS["continuous"]
@@ -96,11 +96,13 @@ class VanillaAgent(pgg.Agent):
 
 def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
     args = tiny_args(tmp_path)
-    ours = torch.load(runs.checkpoint_path(run(args), 1024), weights_only=True)["model"]
+    ours = torch.load(checkpoints.checkpoint_path(run(args), 1024), weights_only=True)["model"]
     monkeypatch.setattr(pgg, "Agent", VanillaAgent)
     monkeypatch.setattr(pgg, "guide", lambda cond, null, guidance: cond)
     monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
-    vanilla = torch.load(runs.checkpoint_path(run(replace(args, run_name="vanilla")), 1024), weights_only=True)["model"]
+    vanilla = torch.load(checkpoints.checkpoint_path(run(replace(args, run_name="vanilla")), 1024), weights_only=True)[
+        "model"
+    ]
     assert set(ours) - set(vanilla) == {"null_obs"}
     assert [k for k in vanilla if not torch.equal(ours[k], vanilla[k])] == []
 
@@ -122,7 +124,7 @@ print(json.dumps(mean.double().tolist()))
 def test_checkpoint_carries_observation_statistics(tmp_path):
     """A checkpoint alone maps a raw observation to the training-time action mean (cleanrl#425)."""
     run_dir = run(tiny_args(tmp_path, guidance=1.1, env_id="Hopper-v4"))
-    agent, ckpt = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 1024))
+    agent, ckpt = pgg.load_checkpoint(checkpoints.checkpoint_path(run_dir, 1024))
     assert ckpt["global_step"] == 1024 and ckpt["action_space"] == "continuous" and ckpt["env_id"] == "Hopper-v4"
     assert float(agent.obs_norm.count) > 1000 and agent.obs_norm.mean.abs().sum() > 0
     raw = np.random.default_rng(0).normal(size=(3, 11)) * 2 + 1
@@ -131,7 +133,7 @@ def test_checkpoint_carries_observation_statistics(tmp_path):
         unnormalised = agent.guided_mean(torch.as_tensor(raw, dtype=torch.float32).clamp(-10, 10), 1.1)
     assert not torch.allclose(in_process, unnormalised, atol=1e-3)  # the statistics matter
     out = subprocess.run(
-        [sys.executable, "-c", CHECK_IN_FRESH_PROCESS, str(ROOT), str(runs.checkpoint_path(run_dir, 1024)),
+        [sys.executable, "-c", CHECK_IN_FRESH_PROCESS, str(ROOT), str(checkpoints.checkpoint_path(run_dir, 1024)),
          json.dumps(raw.tolist())],
         capture_output=True, text=True, check=True,
     )  # fmt: skip
@@ -246,7 +248,7 @@ def test_short_inverted_pendulum_run_learns(tmp_path):
     run_dir = run(
         pgg.Args(env_id="InvertedPendulum-v4", total_timesteps=30_000, guidance=1.1, output_dir=str(tmp_path))
     )
-    agent, _ = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 30_000))
+    agent, _ = pgg.load_checkpoint(checkpoints.checkpoint_path(run_dir, 30_000))
     env = gym.make("InvertedPendulum-v4")
     returns = []
     for episode in range(5):
@@ -264,7 +266,7 @@ def test_short_inverted_pendulum_run_learns(tmp_path):
 
 @pytest.mark.parametrize("env_id", PAPER_TASKS)
 def test_paper_task_steps_through_env_factory(env_id):
-    if env_id == "Pusher-v4" and runs.argument_error(pgg.Args(env_id=env_id), "continuous") is not None:
+    if env_id == "Pusher-v4" and checks.argument_error(pgg.Args(env_id=env_id), "continuous") is not None:
         pytest.skip("Pusher-v4 needs mujoco<3, which is not installed")
     envs = pgg.make_vector_env(env_id, 2, seed=0, discount=0.99, reward_clip=10.0)
     obs, _ = envs.reset(seed=0)

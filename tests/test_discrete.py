@@ -9,7 +9,7 @@ from torch import nn
 from torch.distributions import Categorical
 
 import ppo_pgg_discrete as pgg
-from pgg_utils import runs
+from pgg_utils import checkpoints
 from pgg_utils.guidance import uses_null_branch
 
 
@@ -151,11 +151,13 @@ class VanillaAgent(pgg.Agent):
 
 def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
     args = tiny_args(tmp_path, total_timesteps=4096, guidance=1.0, cond_dropout=0.0)
-    pgg_ckpt = torch.load(runs.checkpoint_path(run(args), 4096), weights_only=True)
+    pgg_ckpt = torch.load(checkpoints.checkpoint_path(run(args), 4096), weights_only=True)
     monkeypatch.setattr(pgg, "Agent", VanillaAgent)
     monkeypatch.setattr(pgg, "guide", lambda cond, null, guidance: cond)
     monkeypatch.setattr(pgg, "guidance_diagnostics", lambda *a: {})
-    vanilla_ckpt = torch.load(runs.checkpoint_path(run(replace(args, run_name="vanilla")), 4096), weights_only=True)
+    vanilla_ckpt = torch.load(
+        checkpoints.checkpoint_path(run(replace(args, run_name="vanilla")), 4096), weights_only=True
+    )
     assert set(pgg_ckpt["model"]) - set(vanilla_ckpt["model"]) == {"null_obs"}
     for key, value in vanilla_ckpt["model"].items():
         assert torch.equal(pgg_ckpt["model"][key], value), key
@@ -230,9 +232,11 @@ def test_checkpoints_round_trip_under_weights_only(tmp_path):
 
 def test_same_seed_same_result(tmp_path):
     args = tiny_args(tmp_path, cond_dropout=0.1, guidance=1.1)
-    a = torch.load(runs.checkpoint_path(run(args), 2048), weights_only=True)["model"]
-    b = torch.load(runs.checkpoint_path(run(replace(args, run_name="again")), 2048), weights_only=True)["model"]
-    c = torch.load(runs.checkpoint_path(run(replace(args, run_name="other", seed=2)), 2048), weights_only=True)["model"]
+    a = torch.load(checkpoints.checkpoint_path(run(args), 2048), weights_only=True)["model"]
+    b = torch.load(checkpoints.checkpoint_path(run(replace(args, run_name="again")), 2048), weights_only=True)["model"]
+    c = torch.load(checkpoints.checkpoint_path(run(replace(args, run_name="other", seed=2)), 2048), weights_only=True)[
+        "model"
+    ]
     assert all(torch.equal(a[k], b[k]) for k in a)
     assert not all(torch.equal(a[k], c[k]) for k in a)
 
@@ -254,7 +258,7 @@ def evaluate(agent, guidance, episodes=10, seed=1000):
 
 def test_short_cartpole_run_learns(tmp_path):
     run_dir = run(pgg.Args(total_timesteps=50_000, guidance=1.1, output_dir=str(tmp_path)))
-    agent, _ = pgg.load_checkpoint(runs.checkpoint_path(run_dir, 50_000))
+    agent, _ = pgg.load_checkpoint(checkpoints.checkpoint_path(run_dir, 50_000))
     # A random policy scores about 22. A broken GAE or autoreset stays far below this.
     assert evaluate(agent, 1.1) > 150
 

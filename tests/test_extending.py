@@ -28,7 +28,7 @@ import plot_results
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from paper_study import paper
-from pgg_utils import fast, files, identity, runs, scripts
+from pgg_utils import checkpoints, fast, files, identity, rundir, runs, scripts
 from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
 from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
 from pgg_utils.identity import FROZEN_DEFAULTS, GOAL_DIMS
@@ -45,7 +45,7 @@ def logged(run_dir, tag: str) -> list[float]:
 
 
 def load(run_dir, mark) -> dict:
-    return torch.load(runs.checkpoint_path(run_dir, mark), weights_only=True)
+    return torch.load(checkpoints.checkpoint_path(run_dir, mark), weights_only=True)
 
 
 # --- the training γ: a schedule with one owner ----------------------------------------------------
@@ -81,8 +81,8 @@ def test_a_scheduled_run_resumes_bit_for_bit_and_refuses_another_schedule(tmp_pa
     stopped.mkdir()
     (stopped / "checkpoints").mkdir()
     for mark in (512, 1024):
-        (stopped / "checkpoints" / runs.checkpoint_path(stopped, mark).name).write_bytes(
-            runs.checkpoint_path(straight, mark).read_bytes()
+        (stopped / "checkpoints" / checkpoints.checkpoint_path(stopped, mark).name).write_bytes(
+            checkpoints.checkpoint_path(straight, mark).read_bytes()
         )
     train(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True))
     a, b = load(straight, 1536), load(stopped, 1536)
@@ -90,7 +90,7 @@ def test_a_scheduled_run_resumes_bit_for_bit_and_refuses_another_schedule(tmp_pa
     if schedule == "adaptive":
         assert a["resume"]["guidance"] == b["resume"]["guidance"]
     changed = replace(args, guidance_final=1.2) if schedule == "linear" else replace(args, guidance_kl_target=2e-4)
-    with pytest.raises(runs.RunDirError, match="other arguments"):
+    with pytest.raises(rundir.RunDirError, match="other arguments"):
         train(ppo_pgg_discrete, replace(changed, run_name="stopped", resume=True))
 
 
@@ -192,7 +192,7 @@ def test_an_actor_with_layer_norm_acts_as_its_module_and_the_first_ratio_is_one(
     run_dir = train(module, small_args(kind, tmp_path, guidance=1.3, cond_dropout=0.0))
     assert first["losses/clipfrac"].item() == 0.0 and abs(first["losses/approx_kl"].item()) < 1e-6
     # the sweep acts through the same module: its deterministic action is the module's guided output
-    agent, ckpt = sweep.load_any_checkpoint(runs.checkpoints_of(run_dir)[-1])
+    agent, ckpt = sweep.load_any_checkpoint(checkpoints.checkpoints_of(run_dir)[-1])
     assert any(isinstance(m, nn.LayerNorm) for m in getattr(agent, network))
     raw = np.random.default_rng(0).normal(size=(8, ckpt["obs_dim"]))
     with torch.no_grad():
@@ -264,7 +264,7 @@ def test_goal_dimensions_outside_the_observation_are_refused(tmp_path):
 
 def test_act_from_a_loaded_agent_is_the_sweeps_policy(tmp_path):
     run_dir = train(ppo_pgg_continuous, small_args("continuous", tmp_path))
-    agent, ckpt = ppo_pgg_continuous.load_checkpoint(runs.checkpoints_of(run_dir)[-1])
+    agent, ckpt = ppo_pgg_continuous.load_checkpoint(checkpoints.checkpoints_of(run_dir)[-1])
     import gymnasium as gym
 
     env = gym.make(ckpt["env_id"])
@@ -453,7 +453,7 @@ def fresh_checkpoint(kind: str) -> dict:
     args = {"obs_clip": 10.0} if kind == "continuous" else {}
     model = SCRIPTS[kind].make_agent(args, shapes).state_dict()
     return {
-        "format_version": runs.CHECKPOINT_FORMAT_VERSION,
+        "format_version": checkpoints.CHECKPOINT_FORMAT_VERSION,
         "action_space": kind,
         "args": args,
         "model": model,
@@ -560,7 +560,7 @@ def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_origi
     assert evaluated["evaluated_by"] == str(fork) and evaluated["same_script"] == "yes"
     # The sweep's episodes are the fork's own Agent.act, not the original Agent's with the fork's weights.
     fork_module = scripts.load_module(fork)
-    agent, ckpt = fork_module.load_checkpoint(runs.checkpoint_path(fork_run, 768))
+    agent, ckpt = fork_module.load_checkpoint(checkpoints.checkpoint_path(fork_run, 768))
     original = ppo_pgg_continuous.make_agent(ckpt["args"], ckpt)
     original.load_state_dict(ckpt["model"])
     for gamma in (1.0, 1.5):
@@ -570,7 +570,7 @@ def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_origi
         assert swept == own.tolist() and swept != tanh.tolist()
     # The original script's loader refuses the fork's checkpoint in one line.
     with pytest.raises(ValueError, match="was trained by .*ppo_pgg_relu.py, not ppo_pgg_continuous.py"):
-        ppo_pgg_continuous.load_checkpoint(runs.checkpoint_path(fork_run, 768))
+        ppo_pgg_continuous.load_checkpoint(checkpoints.checkpoint_path(fork_run, 768))
 
 
 def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_under_guidance_one(tmp_path):

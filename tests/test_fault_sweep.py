@@ -21,7 +21,7 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import files, identity, pooling, runs
+from pgg_utils import checkpoints, files, identity, pooling
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 FORMAT_1 = FIXTURES / "cartpole_format1" / "checkpoints" / "step_000000512.pt"
@@ -148,13 +148,13 @@ def test_a_full_disk_is_one_line_naming_the_file_and_leaves_no_temporary_file(tm
 
 def test_rows_record_the_stack_and_a_cell_of_another_mujoco_is_evaluated_again(tmp_path, monkeypatch):
     assert sweep.EPISODE_COLUMNS[-5:] == ["mujoco", "gymnasium", "numpy", "torch", "action_space"]
-    real_versions = runs.package_versions
-    monkeypatch.setattr(runs, "package_versions", lambda: {**real_versions(), "mujoco": "2.3.3"})
+    real_versions = checkpoints.package_versions
+    monkeypatch.setattr(checkpoints, "package_versions", lambda: {**real_versions(), "mujoco": "2.3.3"})
     args = sweep_args(tmp_path / "out", episodes=4)
     sweep.sweep(args)
     elsewhere = files.read_csv(tmp_path / "out" / "episodes.csv")
     assert {row["mujoco"] for row in elsewhere} == {"2.3.3"}
-    monkeypatch.setattr(runs, "package_versions", real_versions)
+    monkeypatch.setattr(checkpoints, "package_versions", real_versions)
     evaluated = count_jobs(monkeypatch)
     sweep.sweep(args)
     assert len(evaluated) == 2  # not the cells of the other MuJoCo
@@ -212,7 +212,7 @@ def hopper(tmp_path_factory) -> Path:
         env_id="Hopper-v4", total_timesteps=64, num_steps=64, num_minibatches=2, update_epochs=1,
         checkpoint_interval=64, output_dir=str(tmp_path_factory.mktemp("hopper")),
     )  # fmt: skip
-    return runs.checkpoint_path(train(ppo_pgg_continuous, args), 64)
+    return checkpoints.checkpoint_path(train(ppo_pgg_continuous, args), 64)
 
 
 def with_nan(source: Path, target: Path, tensor: str) -> Path:

@@ -23,7 +23,7 @@ import eval_gamma_sweep as sweep
 import plot_results
 import ppo_pgg_discrete
 import reproduce
-from pgg_utils import files, runs
+from pgg_utils import checkpoints, checks, files
 from pgg_utils.files import lock_directory
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -241,7 +241,7 @@ class MultiDiscreteEnv(gym.Env):
 def test_an_action_space_neither_script_trains_gets_no_circular_advice(kind):
     gym.register("NewcomerMultiDiscrete-v0", entry_point=MultiDiscreteEnv)
     try:
-        error = runs.env_error("NewcomerMultiDiscrete-v0", kind)
+        error = checks.env_error("NewcomerMultiDiscrete-v0", kind)
     finally:
         del gym.registry["NewcomerMultiDiscrete-v0"]
     assert error == ("NewcomerMultiDiscrete-v0 has a MultiDiscrete action space; neither script trains it "
@@ -298,5 +298,5 @@ def test_reproduce_trains_and_sweeps_a_namespaced_id_in_one_directory_per_run(tm
     monkeypatch.setenv("PYTHONPATH", os.pathsep.join([str(tmp_path), os.environ.get("PYTHONPATH", "")]))
     assert reproduce.reproduce(tiny_grid(tmp_path, "results", envs=("newcomer46:ns46/Line-v0",))) == 0
     (run_dir,) = (tmp_path / "runs").glob("newcomer46*")
-    assert run_dir.name == "newcomer46-ns46-Line-v0__ppo__s1" and runs.checkpoints_of(run_dir)
+    assert run_dir.name == "newcomer46-ns46-Line-v0__ppo__s1" and checkpoints.checkpoints_of(run_dir)
     assert "| newcomer46:ns46/Line-v0 |" in (tmp_path / "results" / "table_discrete.md").read_text()

@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 
 import reproduce
-from pgg_utils import runs
+from pgg_utils import checkpoints
 from pgg_utils.files import RECORD, InputError, lock_directory, read_csv, sha256_of
 
 TINY = ["--total-timesteps", "2048", "--checkpoint-interval", "1024", "--seeds", "2", "--variants", "ppo", "pgg_g1.1",
@@ -222,7 +222,7 @@ def test_preempted_submitit_job_is_requeued_and_resumes_from_its_last_checkpoint
     executor.update_parameters(timeout_min=60)  # far from it: a preemption, not a timeout
     with reproduce.importable_by_jobs():
         job = executor.submit(reproduce.TrainingTask(), spec)
-    first = runs.checkpoint_path(spec.run_dir, 2048)
+    first = checkpoints.checkpoint_path(spec.run_dir, 2048)
     deadline = time.time() + 300
     while not first.exists() and time.time() < deadline:
         time.sleep(0.02)
@@ -257,8 +257,8 @@ def test_the_launch_counts_trained_half_done_and_not_started_runs(tmp_path):
     specs = reproduce.grid(tiny_args(tmp_path, "state", variants=("ppo",), seeds=3))
     for spec, steps in zip(specs, ((1024, 2048), (1024,), ()), strict=True):
         for step in steps:
-            runs.checkpoint_path(spec.run_dir, step).parent.mkdir(parents=True, exist_ok=True)
-            runs.checkpoint_path(spec.run_dir, step).touch()
+            checkpoints.checkpoint_path(spec.run_dir, step).parent.mkdir(parents=True, exist_ok=True)
+            checkpoints.checkpoint_path(spec.run_dir, step).touch()
     assert reproduce.grid_state(specs) == (
         "3 runs in the grid: 1 trained, 1 half done (CartPole-v1__ppo__s2 at step 1,024), 1 not started"
     )

@@ -19,12 +19,12 @@ from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, 
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import files, identity, progress, runs
+from pgg_utils import checkpoints, checks, files, identity, progress, rundir, runs, training_state
 from pgg_utils.files import lock_directory
 
 
 def checkpoint(run_dir, mark) -> dict:
-    return torch.load(runs.checkpoint_path(run_dir, mark), weights_only=True)
+    return torch.load(checkpoints.checkpoint_path(run_dir, mark), weights_only=True)
 
 
 def run_training(kind: str, *flags, **kwargs):
@@ -50,8 +50,8 @@ def test_resumed_run_is_bit_identical_to_an_uninterrupted_one(kind, tmp_path):
     first, last = args.checkpoint_interval, args.total_timesteps
     stopped = tmp_path / "stopped"
     shutil.copytree(straight, stopped)
-    for later in runs.checkpoint_path(stopped, first).parent.glob("*.pt"):
-        if later.name > runs.checkpoint_path(stopped, first).name:
+    for later in checkpoints.checkpoint_path(stopped, first).parent.glob("*.pt"):
+        if later.name > checkpoints.checkpoint_path(stopped, first).name:
             later.unlink()
     resumed = train(module, replace(args, run_name="stopped", resume=True))
     a, b = checkpoint(straight, last), checkpoint(resumed, last)
@@ -66,7 +66,7 @@ def test_resume_continues_the_learning_rate_schedule_and_purges_later_events(tmp
 
     args = small_args("discrete", tmp_path, cond_dropout=0.0)
     run_dir = train(ppo_pgg_discrete, args)
-    runs.checkpoint_path(run_dir, 1536).unlink()  # as if stopped after the 1024 checkpoint
+    checkpoints.checkpoint_path(run_dir, 1536).unlink()  # as if stopped after the 1024 checkpoint
     train(ppo_pgg_discrete, replace(args, resume=True))
     events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
     events.Reload()
@@ -80,14 +80,14 @@ def test_resume_continues_the_learning_rate_schedule_and_purges_later_events(tmp
 def test_format_one_checkpoints_load_for_evaluation_but_do_not_resume(tmp_path):
     args = small_args("discrete", tmp_path, total_timesteps=1024)
     run_dir = train(ppo_pgg_discrete, args)
-    path = runs.checkpoint_path(run_dir, 512)
+    path = checkpoints.checkpoint_path(run_dir, 512)
     old = checkpoint(run_dir, 512)
     old = {key: value for key, value in old.items() if key not in ("resume", "versions")} | {"format_version": 1}
     torch.save(old, path)
-    runs.checkpoint_path(run_dir, 1024).unlink()
+    checkpoints.checkpoint_path(run_dir, 1024).unlink()
     agent, ckpt = ppo_pgg_discrete.load_checkpoint(path)
     assert ckpt["format_version"] == 1 and torch.equal(agent.null_obs, old["model"]["null_obs"])
-    with pytest.raises(runs.RunDirError, match="predates resumable checkpoints"):
+    with pytest.raises(rundir.RunDirError, match="predates resumable checkpoints"):
         prepare(ppo_pgg_discrete, replace(args, resume=True))
     assert path.exists()
 
@@ -95,8 +95,8 @@ def test_format_one_checkpoints_load_for_evaluation_but_do_not_resume(tmp_path):
 def test_one_checkpoint_per_saved_iteration():
     """A mark that the last iteration passes is left to the total's checkpoint: interval 3900 of a
     4000-step run of 512-step batches would otherwise write step_3900 and step_4000 at one point."""
-    assert runs.checkpoint_marks(4000, 3900, 512) == [4000]
-    assert runs.checkpoint_marks(2500, 1024, 256) == [1024, 2048, 2500]
+    assert checkpoints.checkpoint_marks(4000, 3900, 512) == [4000]
+    assert checkpoints.checkpoint_marks(2500, 1024, 256) == [1024, 2048, 2500]
 
 
 def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_previous_ones_whole(
@@ -155,12 +155,12 @@ def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
     envs.reset(seed=0)
     for _ in range(5):
         envs.step(np.full((1, 1), 0.5, np.float32))
-    states = runs.env_state(envs)
+    states = training_state.env_state(envs)
     assert states[0]["complete"] is False
     fresh = ppo_pgg_continuous.make_vector_env("Drift", 1, seed=0, discount=0.99, reward_clip=10.0)
     fresh.reset(seed=1)
-    runs.restore_env_state(fresh, states)
-    saved, restored = (next(w for w in runs.wrapper_chain(e.envs[0]) if isinstance(w, ppo_pgg_continuous.NormalizeClipReward))
+    training_state.restore_env_state(fresh, states)
+    saved, restored = (next(w for w in training_state.wrapper_chain(e.envs[0]) if isinstance(w, ppo_pgg_continuous.NormalizeClipReward))
                        for e in (envs, fresh))  # fmt: skip
     assert restored.return_count == saved.return_count == 1e-4 + 5 and restored.return_var == saved.return_var
 
@@ -168,7 +168,7 @@ def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
 def test_checkpoint_records_the_software_stack_and_the_cpu(tmp_path):
     ckpt = checkpoint(train(ppo_pgg_discrete, small_args("discrete", tmp_path, total_timesteps=512)), 512)
     assert ckpt["versions"]["torch"] == torch.__version__ and ckpt["versions"]["gymnasium"]
-    assert ckpt["machine"] == runs.machine() and torch.backends.cpu.get_cpu_capability() in ckpt["machine"]
+    assert ckpt["machine"] == checkpoints.machine() and torch.backends.cpu.get_cpu_capability() in ckpt["machine"]
     # The training code: the script and the pgg_utils modules it ran, by commit and by content.
     assert (
         len(ckpt["code"]["sha1"]) == 40
@@ -206,10 +206,12 @@ def test_invalid_arguments_are_refused_before_touching_the_disk(flag, tmp_path):
 def test_finished_and_unfinished_runs_need_an_explicit_choice(tmp_path):
     args = small_args("discrete", tmp_path)
     run_dir = train(ppo_pgg_discrete, args)
-    with pytest.raises(runs.RunDirError, match="holds a finished run: pass --overwrite"):
+    with pytest.raises(rundir.RunDirError, match="holds a finished run: pass --overwrite"):
         prepare(ppo_pgg_discrete, args)
-    runs.checkpoint_path(run_dir, 1536).unlink()
-    with pytest.raises(runs.RunDirError, match=r"unfinished run \(last checkpoint step_000001024.pt\): pass --resume"):
+    checkpoints.checkpoint_path(run_dir, 1536).unlink()
+    with pytest.raises(
+        rundir.RunDirError, match=r"unfinished run \(last checkpoint step_000001024.pt\): pass --resume"
+    ):
         prepare(ppo_pgg_discrete, args)
     train(ppo_pgg_discrete, replace(args, overwrite=True, total_timesteps=512, checkpoint_interval=512))
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
@@ -287,7 +289,7 @@ def test_capture_video_records_the_first_sub_envs_episodes(tmp_path):
 
     args = ppo_pgg_discrete.Args(output_dir=str(tmp_path), total_timesteps=512, checkpoint_interval=512, num_envs=1,
                                  num_steps=512, capture_video=True)  # fmt: skip
-    assert runs.argument_error(args, "discrete") is None
+    assert checks.argument_error(args, "discrete") is None
     run_dir = train(ppo_pgg_discrete, args)
     first = run_dir / "videos" / "rl-video-episode-0.mp4"
     events = EventAccumulator(str(run_dir), size_guidance={"scalars": 0})
@@ -366,18 +368,18 @@ def test_a_task_whose_state_holds_numpy_scalars_writes_checkpoints_that_load_and
     hold as such; stopped and resumed, the run still ends on the uninterrupted run's bits."""
     args = small_args("discrete", tmp_path, env_id="MountainCar-v0", run_name="straight")
     straight = train(ppo_pgg_discrete, args)
-    ppo_pgg_discrete.load_checkpoint(runs.checkpoint_path(straight, 512))
+    ppo_pgg_discrete.load_checkpoint(checkpoints.checkpoint_path(straight, 512))
     stopped = tmp_path / "stopped"
     shutil.copytree(straight, stopped)
     for later in (1024, 1536):
-        runs.checkpoint_path(stopped, later).unlink()
+        checkpoints.checkpoint_path(stopped, later).unlink()
     train(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True))
     a, b = checkpoint(straight, 1536), checkpoint(stopped, 1536)
     assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
 
 
 def test_a_checkpoint_that_would_not_load_back_stops_the_run_at_the_first_one(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr(runs, "pickle_free", lambda value: value)  # numpy arrays go in as they are
+    monkeypatch.setattr(training_state, "pickle_free", lambda value: value)  # numpy arrays go in as they are
     code, error = launch(ppo_pgg_discrete, small_args("discrete", tmp_path), capsys)
     assert code == 1 and len(error) == 1 and "step_000000512.pt" in error[0] and "would not load back" in error[0]
     assert not list(tmp_path.rglob("step_*.pt")) and not list(tmp_path.rglob("*.tmp"))
@@ -411,12 +413,12 @@ def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_fi
     assert code == 1 and len(error) == 1, error
     assert "iteration 3 (global step 768): non-finite weights; checkpoints up to step_000000512.pt are kept" in error[0]
     run_dir = tmp_path / identity.run_name(args)
-    assert [p.name for p in runs.checkpoints_of(run_dir)] == ["step_000000512.pt"]
+    assert [p.name for p in checkpoints.checkpoints_of(run_dir)] == ["step_000000512.pt"]
     # A checkpoint with non-finite weights (from elsewhere) is never continued.
     ckpt = checkpoint(run_dir, 512)
     ckpt["model"]["null_obs"][0] = float("nan")
-    torch.save(ckpt, runs.checkpoint_path(run_dir, 512))
-    with pytest.raises(runs.RunDirError, match="non-finite weights"):
+    torch.save(ckpt, checkpoints.checkpoint_path(run_dir, 512))
+    with pytest.raises(rundir.RunDirError, match="non-finite weights"):
         prepare(ppo_pgg_discrete, replace(args, resume=True))
 
 
@@ -425,10 +427,10 @@ def test_resume_sets_an_unreadable_last_checkpoint_aside_and_continues_from_the_
     straight = train(ppo_pgg_discrete, args)
     stopped = tmp_path / "stopped"
     shutil.copytree(straight, stopped)
-    runs.checkpoint_path(stopped, 1536).unlink()
-    truncated = runs.checkpoint_path(stopped, 1024)
+    checkpoints.checkpoint_path(stopped, 1536).unlink()
+    truncated = checkpoints.checkpoint_path(stopped, 1024)
     truncated.write_bytes(truncated.read_bytes()[:1000])
-    with pytest.raises(runs.RunDirError, match="pass --resume to continue from the last readable checkpoint"):
+    with pytest.raises(rundir.RunDirError, match="pass --resume to continue from the last readable checkpoint"):
         prepare(ppo_pgg_discrete, replace(args, run_name="stopped"))
     code, error = launch(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True), capsys)
     assert code == 0 and any("set aside step_000001024.pt.unreadable" in line for line in error)
@@ -498,9 +500,9 @@ def test_a_refused_resume_sets_nothing_aside(tmp_path):
     unreadable checkpoint stays where it was."""
     args = small_args("discrete", tmp_path)
     run_dir = train(ppo_pgg_discrete, args)
-    last = runs.checkpoint_path(run_dir, 1536)
+    last = checkpoints.checkpoint_path(run_dir, 1536)
     last.write_bytes(b"not a checkpoint")
-    with pytest.raises(runs.RunDirError, match="other arguments"):
+    with pytest.raises(rundir.RunDirError, match="other arguments"):
         prepare(ppo_pgg_discrete, replace(args, resume=True, learning_rate=0.002))
     assert last.read_bytes() == b"not a checkpoint" and not list(run_dir.rglob("*.unreadable"))
 
@@ -514,7 +516,7 @@ def test_resuming_with_capture_video_switched_on_still_ends_on_the_uninterrupted
     stopped = tmp_path / "stopped"
     shutil.copytree(straight, stopped)
     for later in (1024, 1536):
-        runs.checkpoint_path(stopped, later).unlink()
+        checkpoints.checkpoint_path(stopped, later).unlink()
     train(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True, capture_video=True))
     a, b = checkpoint(straight, 1536), checkpoint(stopped, 1536)
     assert all(torch.equal(a["model"][key], b["model"][key]) for key in a["model"])
@@ -571,14 +573,14 @@ def test_a_fresh_start_never_deletes_a_file_the_scripts_did_not_write(tmp_path):
     (run_dir / "videos" / "holiday.mp4").write_bytes(b"mine")
     (run_dir / "events.out.tfevents.1.old").write_bytes(b"an earlier start's curve")
     with pytest.raises(
-        runs.RunDirError, match="holds TensorBoard events of an earlier start that reached no checkpoint"
+        rundir.RunDirError, match="holds TensorBoard events of an earlier start that reached no checkpoint"
     ):
         prepare(ppo_pgg_discrete, args)
     assert sorted(p.name for p in run_dir.rglob("*") if p.is_file()) == [".lock", "events.out.tfevents.1.old",
                                                                          "holiday.mp4"]  # fmt: skip
     train(ppo_pgg_discrete, replace(args, overwrite=True))
     (run_dir / "checkpoints" / "my_notes.txt").write_text("notes")
-    (run_dir / "checkpoints" / "step_best.pt").write_bytes(runs.checkpoint_path(run_dir, 512).read_bytes())
+    (run_dir / "checkpoints" / "step_best.pt").write_bytes(checkpoints.checkpoint_path(run_dir, 512).read_bytes())
     train(ppo_pgg_discrete, replace(args, overwrite=True))
     assert (run_dir / "videos" / "holiday.mp4").read_bytes() == b"mine"
     assert (run_dir / "checkpoints" / "my_notes.txt").read_text() == "notes" and (
@@ -594,11 +596,11 @@ def test_resume_restarts_a_run_that_reached_no_checkpoint_only_if_it_is_the_same
     same run's start (by its args.json), and refuses those of another."""
     args = small_args("discrete", tmp_path, total_timesteps=512, checkpoint_interval=512, run_name="r")
     run_dir = train(ppo_pgg_discrete, args)
-    runs.checkpoint_path(run_dir, 512).unlink()
-    with pytest.raises(runs.RunDirError, match=r"of a run with other arguments \(learning_rate"):
+    checkpoints.checkpoint_path(run_dir, 512).unlink()
+    with pytest.raises(rundir.RunDirError, match=r"of a run with other arguments \(learning_rate"):
         prepare(ppo_pgg_discrete, replace(args, resume=True, learning_rate=0.002))
     train(ppo_pgg_discrete, replace(args, resume=True))
-    assert runs.checkpoint_path(run_dir, 512).exists() and len(list(run_dir.glob("events.out.tfevents.*"))) == 1
+    assert checkpoints.checkpoint_path(run_dir, 512).exists() and len(list(run_dir.glob("events.out.tfevents.*"))) == 1
 
 
 def test_an_args_json_that_disagrees_with_the_checkpoints_is_refused(tmp_path):
@@ -608,8 +610,8 @@ def test_an_args_json_that_disagrees_with_the_checkpoints_is_refused(tmp_path):
     (run_dir / "args.json").write_text(edited)
     expected = (f"{run_dir / 'args.json'} disagrees with the run's checkpoints: env_id 'Acrobot-v1' (checkpoints: "
                 "'CartPole-v1')")  # fmt: skip
-    assert runs.record_error(run_dir) == expected
-    with pytest.raises(runs.RunDirError, match="disagrees with the run's checkpoints"):
+    assert rundir.record_error(run_dir) == expected
+    with pytest.raises(rundir.RunDirError, match="disagrees with the run's checkpoints"):
         prepare(ppo_pgg_discrete, replace(args, resume=True))
     assert (run_dir / "args.json").read_text() == edited
 
@@ -629,14 +631,14 @@ def test_a_namespaced_id_makes_one_path_component_and_other_names_are_unchanged(
 def test_a_misnamed_checkpoint_is_skipped_with_a_line_by_the_resume_and_the_sweep(tmp_path, capsys):
     args = small_args("discrete", tmp_path, total_timesteps=1024, checkpoint_interval=512)
     run_dir = train(ppo_pgg_discrete, args)
-    runs.checkpoint_path(run_dir, 1024).unlink()
+    checkpoints.checkpoint_path(run_dir, 1024).unlink()
     misnamed = run_dir / "checkpoints" / "step_abc.pt"
     misnamed.touch()
     code, error = launch(ppo_pgg_discrete, replace(args, resume=True), capsys)
     assert code == 0 and f"note: {misnamed}: not a checkpoint's name (step_<digits>.pt); left as it is" in error
-    assert misnamed.exists() and runs.checkpoint_path(run_dir, 1024).exists()
+    assert misnamed.exists() and checkpoints.checkpoint_path(run_dir, 1024).exists()
     skipped = []
-    assert runs.find_checkpoints([run_dir], skipped=skipped) == runs.checkpoints_of(run_dir)
+    assert checkpoints.find_checkpoints([run_dir], skipped=skipped) == checkpoints.checkpoints_of(run_dir)
     assert skipped == [f"{misnamed}: not a checkpoint's name (step_<digits>.pt); left as it is"]
 
 
@@ -651,7 +653,7 @@ class EmptyObservation(gym.Env):
 def test_an_empty_observation_space_is_refused_before_training():
     gym.register("EmptyObservation-v0", entry_point=EmptyObservation)
     try:
-        error = runs.env_error("EmptyObservation-v0", "discrete")
+        error = checks.env_error("EmptyObservation-v0", "discrete")
     finally:
         del gym.registry["EmptyObservation-v0"]
     assert error == "EmptyObservation-v0 has an empty observation space (shape (0,)): there is no state to condition on"

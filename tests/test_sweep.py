@@ -21,8 +21,8 @@ import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import cells, identity
+from pgg_utils.checkpoints import checkpoint_step
 from pgg_utils.files import read_csv
-from pgg_utils.runs import checkpoint_step
 
 SCRIPT = [sys.executable, str(ROOT / "eval_gamma_sweep.py")]
 

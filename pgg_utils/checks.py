@@ -1,0 +1,100 @@
+"""The checks a training run passes before the disk is touched: its arguments, and whether its
+script can train its env here (action space, observations, rendering)."""
+
+import importlib.util
+import os
+import shutil
+import tempfile
+import warnings
+
+import gymnasium as gym
+
+from pgg_utils.arguments import ARGUMENT_RULES, run_name_error
+from pgg_utils.guidance import schedule_error
+from pgg_utils.identity import run_name
+
+
+def argument_error(args, kind: str) -> str | None:
+    """A one-line description of what is wrong with a training script's `args` (`kind`: discrete or
+    continuous, the action space it trains), or None. Makes the env once; touches no file."""
+    for name, (holds, requirement) in ARGUMENT_RULES.items():
+        if hasattr(args, name) and not holds(getattr(args, name)):
+            return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
+    if error := schedule_error(args) or run_name_error(args.run_name):
+        return error
+    if args.run_name is None and (
+        error := run_name_error(run_name(args), "the run name built from --env-id and --exp-name")
+    ):
+        return f"{error}: choose another --exp-name, or pass --run-name"
+    batch_size = args.num_envs * args.num_steps
+    if args.num_minibatches <= 0 or batch_size % args.num_minibatches:
+        return f"--num-minibatches must divide num_envs * num_steps = {batch_size}"
+    if args.norm_adv and batch_size // args.num_minibatches < 2:
+        return (f"minibatches of {batch_size // args.num_minibatches} row cannot normalise advantages (a zero std): "
+                "use fewer --num-minibatches, more --num-steps, or --no-norm-adv")  # fmt: skip
+    if args.checkpoint_interval < batch_size:
+        return f"--checkpoint-interval must be at least one batch, num_envs * num_steps = {batch_size}"
+    if args.resume and args.overwrite:
+        return "--resume and --overwrite exclude each other"
+    if args.compile and not any(shutil.which(cxx) for cxx in (os.environ.get("CXX", "g++"), "g++", "clang++")):
+        return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
+    if args.track and importlib.util.find_spec("wandb") is None:
+        return "--track needs Weights and Biases: pip install wandb"
+    return env_error(args.env_id, kind, args.capture_video, getattr(args, "null_dims", None))
+
+
+def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=None) -> str | None:
+    """Why a training script of `kind` cannot train `env_id` here (with the null embedding on `null_dims`), or None."""
+    try:
+        env = gym.make(env_id, render_mode="rgb_array" if capture_video else None)
+    except ImportError as e:
+        if env_id == "Pusher-v4":
+            return "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); with a newer mujoco use Pusher-v5"
+        return f"cannot make environment {env_id!r}: {e}"
+    except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
+        backend = os.environ.get("MUJOCO_GL")
+        hint = (f" (MUJOCO_GL={backend}: is its library installed? osmesa needs apt-get install libosmesa6, egl "
+                "libegl1)" if backend and capture_video else "")  # fmt: skip
+        return f"cannot make environment {env_id!r}: {e}{hint}"
+    action_space, observation_space = env.action_space, env.observation_space
+    error = video_error(env) if capture_video else None
+    env.close()
+    wanted, other = (gym.spaces.Discrete, "continuous") if kind == "discrete" else (gym.spaces.Box, "discrete")
+    if not isinstance(action_space, (gym.spaces.Discrete, gym.spaces.Box)):
+        return (f"{env_id} has a {type(action_space).__name__} action space; neither script trains it "
+                "(ppo_pgg_discrete.py: Discrete, ppo_pgg_continuous.py: Box)")  # fmt: skip
+    if not isinstance(action_space, wanted):
+        return (f"{env_id} has a {type(action_space).__name__} action space; this script needs "
+                f"{wanted.__name__} (use ppo_pgg_{other}.py)")  # fmt: skip
+    if kind == "discrete" and not (isinstance(observation_space, gym.spaces.Box) and len(observation_space.shape) == 1):
+        return f"{env_id} has a {type(observation_space).__name__} observation space; ppo_pgg_discrete.py needs a vector (1-D Box)"
+    obs_dim = gym.spaces.flatdim(observation_space)
+    if obs_dim == 0:
+        return f"{env_id} has an empty observation space (shape {observation_space.shape}): there is no state to condition on"
+    if null_dims is not None and not all(0 <= d < obs_dim for d in null_dims):
+        return f"--null-dims must be observation indices of {env_id}, 0..{obs_dim - 1}, got {list(null_dims)}"
+    return error
+
+
+def video_error(env: gym.Env) -> str | None:
+    """Why this env cannot be recorded here (a missing package or rendering backend), or None."""
+    if not os.environ.get("XDG_RUNTIME_DIR"):  # SDL (pygame's renderer) complains of it at every init
+        os.environ["XDG_RUNTIME_DIR"] = tempfile.mkdtemp(prefix="xdg_runtime_")
+    try:
+        import moviepy  # noqa: F401  (gymnasium's RecordVideo writes with it)
+
+        env.reset(seed=0)
+        with warnings.catch_warnings():  # a failing GL backend warns before it raises
+            warnings.simplefilter("ignore")
+            if env.render() is None:
+                return f"{env.spec.id} renders no frames"
+    except ImportError as e:
+        return f"--capture-video needs the [video] extra (pip install -e '.[video]'): {e}"
+    except Exception as e:  # rendering backends fail with anything from OpenGL, pygame or MuJoCo
+        hint = (
+            "; headless MuJoCo needs MUJOCO_GL=egl or osmesa (apt-get install libosmesa6)"
+            if "mujoco" in type(env.unwrapped).__module__
+            else ""
+        )
+        return f"--capture-video cannot render {env.spec.id} here ({type(e).__name__}: {e}){hint}"
+    return None
