@@ -87,7 +87,7 @@ from pgg_utils.files import (
     write_csv_atomic,
     write_record,
 )
-from pgg_utils.identity import configuration, configuration_fields
+from pgg_utils.identity import configuration, configuration_fields, run_of
 from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
@@ -323,7 +323,7 @@ def run_job(job: Job) -> JobResult:
         "env_id": ckpt["env_id"],
         "variant": fields["variant"],
         "config": fields["config"],
-        "run": job.checkpoint.parent.parent.name,
+        "run": run_of(ckpt, job.checkpoint),
         "seed": ckpt["args"]["seed"],
         "train_guidance": fields["train_guidance"],
         "cond_dropout": fields["cond_dropout"],
@@ -390,6 +390,8 @@ def check_args(args: Args) -> None:
         raise InputError(f"--eval-seed and --video-episode must be >= 0, got {args.eval_seed} and {args.video_episode}")
     if not args.output:
         raise InputError("--output must name a directory")
+    if error := scripts.given_script_error(args.script):
+        raise InputError(error)
 
 
 # --- the sweep -----------------------------------------------------------------------------------------
@@ -500,7 +502,7 @@ def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_co
     trained_sha1 = ckpt.get("code", {}).get("script_sha1")
     same = "unknown" if trained_sha1 is None else "yes" if trained_sha1 == script_sha1 else "no"
     evaluator = "|".join([script_sha1, *(f"{file}={sha1}" for file, sha1 in sorted(task_code[key].items()))])
-    record = {"run": checkpoint.parent.parent.name, "step": ckpt["step_mark"], "env_id": ckpt["env_id"],
+    record = {"run": run_of(ckpt, checkpoint), "step": ckpt["step_mark"], "env_id": ckpt["env_id"],
               "trained_by": scripts.script_name(ckpt), "evaluated_by": scripts.recorded_path(script),
               "evaluated_by_sha1": script_sha1, "same_script": same}  # fmt: skip
     return Evaluation(script, evaluator, record)

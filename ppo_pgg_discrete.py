@@ -23,6 +23,7 @@ progress) is in `pgg_utils.runs`.
 from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
 
 # isort: split
+import sys
 from collections import defaultdict
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -34,7 +35,7 @@ import tyro
 from torch import nn
 
 from pgg_utils import checkpoints, runs, scripts, training_state
-from pgg_utils.arguments import RunArgs, acting_error
+from pgg_utils.arguments import RunArgs, acting_error, answer_cleanrl_habits
 from pgg_utils.fast import (
     evaluation_forward,
     flatten_parameters,
@@ -577,7 +578,7 @@ def load_checkpoint(path) -> tuple[Agent, dict]:
 
 
 def main() -> None:
-    args = tyro.cli(Args, description=__doc__)
+    args = tyro.cli(Args, description=__doc__, args=answer_cleanrl_habits(sys.argv[1:]))
     runs.launch(args, ACTION_SPACE, __file__, train)
 
 

@@ -41,7 +41,7 @@ import tyro
 import eval_gamma_sweep
 import plot_results
 from paper_study import paper
-from pgg_utils import checkpoints, checks, processes, rundir, scripts
+from pgg_utils import checkpoints, checks, processes, scripts
 from pgg_utils.arguments import env_id_in_path, guidance_error
 from pgg_utils.files import (
     RECORD,
@@ -53,6 +53,7 @@ from pgg_utils.files import (
     one_line_errors,
     write_atomic,
 )
+from pgg_utils.identity import Configuration
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
@@ -367,12 +368,13 @@ def other_arguments(spec: RunSpec) -> str | None:
     if latest is None:
         return None
     try:
-        recorded = checkpoints.read_checkpoint_file(latest).get("args", {})
+        recorded = Configuration.of_checkpoint(checkpoints.read_checkpoint_file(latest))
     except ValueError:  # the sweep lists it in skipped.csv
         return None
-    module = scripts.original(paper.action_kind(spec.env_id))
+    kind = paper.action_kind(spec.env_id)
+    module = scripts.original(kind)
     wanted = tyro.cli(module.Args, args=spec.command()[2:])  # the arguments the run's command gives it
-    differing = rundir.differing_arguments(recorded, asdict(wanted), asdict(module.Args()))
+    differing = recorded.differing(Configuration.of_run(module.__file__, kind, wanted), asdict(module.Args()))
     return f"{spec.name} ({', '.join(differing)})" if differing else None
 
 

@@ -2,6 +2,7 @@
 sweep, the launcher and an agent's `act`. No torch, no gymnasium."""
 
 import math
+import sys
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -21,8 +22,8 @@ class RunArgs:
     """The arguments every training script has besides its algorithm's: CleanRL's header, and where
     and how the run is recorded."""
 
-    exp_name: str = "ppo_pgg"
-    """the name of this experiment, part of the run directory's name"""
+    exp_name: str | None = None
+    """the name of this experiment, part of the run directory's name, and what TensorBoard and W&B runs are grouped by; None: CleanRL's default, the script's file stem (`ppo_pgg_relu` for a fork), and `ppo_pgg` for the repository's two scripts, as their runs have always been named"""
     seed: int = 1
     """seed of the experiment (torch, numpy, random and the environments)"""
     torch_deterministic: bool = True
@@ -40,7 +41,7 @@ class RunArgs:
     output_dir: str = "runs"
     """directory under which the run directory is created"""
     run_name: str | None = None
-    """run directory name, one path component; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`, with the schedule in place of `g{guidance}` (pgg_utils/identity.py)"""
+    """run directory name, one path component; None: `{env_id}__{exp_name}__g{guidance}__p{cond_dropout}__s{seed}`, with the schedule in place of `g{guidance}` and a fork's new arguments with their values before the seed (pgg_utils/identity.py, Configuration.run_name)"""
     resume: bool = False
     """continue the run in the run directory from its last readable checkpoint (start it if it has none)"""
     overwrite: bool = False
@@ -56,9 +57,41 @@ class RunArgs:
 RUN_ONLY_ARGS = frozenset(f.name for f in fields(RunArgs)) - {"seed"}
 
 
-def training_arguments(values: dict, defaults: dict) -> dict:
-    """The arguments that decide what a run learns; those an older checkpoint lacks at their defaults."""
-    return {name: values.get(name, default) for name, default in defaults.items() if name not in RUN_ONLY_ARGS}
+# CleanRL's flags typed from habit, by their dashed spelling (CleanRL's tyro also takes `--no_cuda`): the
+# answer that points to this project's equivalent, and whether the flag is accepted (its meaning holds here).
+CPU_ONLY = (
+    "these scripts train on the CPU only (small MLPs on a few envs, and the tables' numbers are of CPU runs); "
+    "the speed comes from the numpy rollout path (pgg_utils/fast.py), one torch thread per run and --compile "
+    "(benchmarks/README.md)"
+)
+SAVED = "checkpoints are always saved, every --checkpoint-interval steps, in <run>/checkpoints"
+CLEANRL_HABITS = {
+    "--gamma": ("CleanRL's --gamma is the discount factor: here it is --discount (γ is PGG's guidance here)", False),
+    "--cuda": (CPU_ONLY, False),
+    "--no-cuda": (CPU_ONLY, True),
+    "--save-model": (SAVED, True),
+    "--no-save-model": (SAVED, False),
+    "--batch-size": ("the batch size is derived: --num-envs × --num-steps", False),
+    "--minibatch-size": ("the minibatch size is derived: --num-envs × --num-steps / --num-minibatches", False),
+}
+
+
+def answer_cleanrl_habits(argv: list[str]) -> list[str]:
+    """`argv` without the CleanRL flags whose meaning holds here (--no-cuda, --save-model), each noted in
+    one line on stderr; a CleanRL flag that means something else here (--gamma) or nothing (--cuda,
+    --batch-size) exits 2 with one line naming this project's equivalent. For a training script's tyro.cli."""
+    kept = []
+    for i, token in enumerate(argv):
+        flag = token.split("=", 1)[0].replace("_", "-") if token.startswith("--") else None
+        if flag not in CLEANRL_HABITS:
+            kept.append(token)
+            continue
+        answer, accepted = CLEANRL_HABITS[flag]
+        if not accepted or "=" in token:
+            print(f"error: {token.split('=', 1)[0]}: {answer}", file=sys.stderr)
+            sys.exit(2)
+        print(f"note: {token}: {answer}; it changes nothing here", file=sys.stderr)
+    return kept
 
 
 # --- argument rules ------------------------------------------------------------------------------

@@ -25,6 +25,7 @@ import tyro
 
 from pgg_utils import checkpoints, scripts
 from pgg_utils.files import InputError, one_line_errors, write_atomic
+from pgg_utils.identity import FITTED_NULL_SUFFIX, run_of
 
 BC_FIT = "behaviour cloning"
 
@@ -34,7 +35,7 @@ class Args:
     paths: tyro.conf.Positional[tuple[str, ...]]
     """run directories, roots to search for them, or checkpoint files"""
     output: str = "bc_null"
-    """folder of the fitted checkpoints: <run>__bcnull/checkpoints/step_*.pt"""
+    """folder of the fitted checkpoints: <run>__bcnull/checkpoints/step_*.pt, <run> the source's run (identity.run_of)"""
     steps: tuple[int, ...] | None = None
     """only the checkpoints of these step marks; None: all"""
     episodes: int = 40
@@ -120,9 +121,9 @@ def fit_null(agent, kind: str, actions: np.ndarray, fit_steps: int, learning_rat
         return null.detach(), float(nll())
 
 
-def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
-    """The checkpoint of `path` with its null embedding behaviour-cloned, and the fit recorded."""
-    ckpt = checkpoints.read_checkpoint_file(path)
+def fitted_checkpoint(path: Path, ckpt: dict, args: Args, given: tuple[Path, ...], run: str) -> dict:
+    """The checkpoint `ckpt` (read from `path`) with its null embedding behaviour-cloned, and the fit
+    recorded, as a checkpoint of the run `run`."""
     if ckpt.get("null_fit"):
         raise ValueError("already holds a fitted null branch")
     if ckpt["args"].get("null_dims") is not None:
@@ -134,25 +135,48 @@ def fitted_checkpoint(path: Path, args: Args, given: tuple[Path, ...]) -> dict:
     fit = {"method": BC_FIT, "episodes": args.episodes, "episode_seed": args.episode_seed, "actions": len(actions),
            "fit_steps": args.fit_steps, "learning_rate": args.learning_rate, "nll": nll,
            "reach": reach(agent, ckpt["action_space"], null, actions),
-           "source": str(path), "source_null_norm": float(ckpt["model"]["null_obs"].norm())}  # fmt: skip
+           "source": f"{run_of(ckpt, path)}/checkpoints/{Path(path).name}",
+           "source_null_norm": float(ckpt["model"]["null_obs"].norm())}  # fmt: skip
     agent = {key: value for key, value in ckpt.items() if key != "resume"}  # an agent to evaluate, not to resume
-    return {**agent, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
+    return {**agent, "run": run, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
+
+
+def argument_error(args: Args) -> str | None:
+    """What is wrong with the arguments, in one line, or None."""
+    if not args.paths:
+        return "no run directories, roots or checkpoint files given (e.g. python -m pgg_utils.bc_null runs/)"
+    for name in ("episodes", "fit_steps"):
+        if getattr(args, name) <= 0:
+            return f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}"
+    if not (math.isfinite(args.learning_rate) and args.learning_rate > 0):
+        return f"--learning-rate must be a finite number > 0, got {args.learning_rate}"
+    if not 0 <= args.episode_seed < 2**32 - 10**6:
+        return f"--episode-seed must be a non-negative integer below 2**32 - 10**6 (numpy's seeds), got {args.episode_seed}"
+    return scripts.given_script_error(args.script)
 
 
 def main() -> None:
     args = tyro.cli(Args, description=__doc__)
     with one_line_errors():
-        if args.episodes <= 0 or args.fit_steps <= 0 or not args.learning_rate > 0:
-            raise InputError("--episodes, --fit-steps and --learning-rate must be positive")
+        if error := argument_error(args):
+            raise InputError(error)
         torch.set_num_threads(1)
         given, written = tuple(Path(p).resolve() for p in args.script), 0
         for path in checkpoints.find_checkpoints(args.paths, args.steps):
-            destination = Path(args.output) / f"{path.parent.parent.name}__bcnull" / "checkpoints" / path.name
+            try:
+                ckpt = checkpoints.read_checkpoint_file(path)
+            except ValueError as e:
+                print(f"skipped {path}: {e}", file=sys.stderr)
+                continue
+            run = run_of(ckpt, path) + FITTED_NULL_SUFFIX
+            destination = Path(args.output) / run / "checkpoints" / path.name
             if destination.exists():
                 print(f"{destination} exists; kept", file=sys.stderr)
                 continue
             try:
-                ckpt = fitted_checkpoint(path, args, given)
+                ckpt = fitted_checkpoint(path, ckpt, args, given, run)
+            except scripts.ScriptError as e:  # no checkpoint of this script can be fitted: the user must say which
+                raise InputError(f"{path}: {e}") from None
             except ValueError as e:
                 print(f"skipped {path}: {e}", file=sys.stderr)
                 continue

@@ -6,24 +6,30 @@ import os
 import shutil
 import tempfile
 import warnings
+from pathlib import Path
 
 import gymnasium as gym
 
 from pgg_utils.arguments import ARGUMENT_RULES, run_name_error
 from pgg_utils.guidance import schedule_error
-from pgg_utils.identity import run_name
+from pgg_utils.identity import Configuration
+from pgg_utils.scripts import ORIGINALS, REPOSITORY
 
 
-def argument_error(args, kind: str) -> str | None:
-    """A one-line description of what is wrong with a training script's `args` (`kind`: discrete or
-    continuous, the action space it trains), or None. Makes the env once; touches no file."""
+def argument_error(args, kind: str, script: str | Path | None = None) -> str | None:
+    """A one-line description of what is wrong with the `args` of training script `script` (None: the
+    repository's own for `kind`, discrete or continuous, the action space it trains), or None. Makes the
+    env once; touches no file."""
     for name, (holds, requirement) in ARGUMENT_RULES.items():
         if hasattr(args, name) and not holds(getattr(args, name)):
             return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
     if error := schedule_error(args) or run_name_error(args.run_name):
         return error
     if args.run_name is None and (
-        error := run_name_error(run_name(args), "the run name built from --env-id and --exp-name")
+        error := run_name_error(
+            Configuration.of_run(script or REPOSITORY / f"{ORIGINALS[kind]}.py", kind, args).run_name,
+            "the run name built from --env-id and --exp-name",
+        )
     ):
         return f"{error}: choose another --exp-name, or pass --run-name"
     batch_size = args.num_envs * args.num_steps

@@ -1,11 +1,14 @@
-"""A run's identity, once for training, the sweep, the tables and the learning curves: its variant id
-(from its PGG arguments), its default run directory name, and its configuration, the one key runs are
-pooled by: the training script plus every training argument except the run-only ones. The label that
-shows a configuration names the script where it is not the repository's own and every argument that
-differs from its default (CleanRL's, frozen) and every argument CleanRL lacks with its value, so a new
-argument in a script's `Args` keeps its runs apart with no table to extend. Plain Python: nothing of the paper study."""
+"""A run's configuration, built once (`Configuration`) from its script and its training arguments, for
+training, resume, the sweep, the tables, the learning curves, reproduce and bc_null. It gives the run's
+default directory name, its variant id, its label (the key runs are pooled by), what a resume compares,
+and the columns a sweep writes. The label names the script where it is not the repository's own, every
+argument that differs from its default (CleanRL's, frozen) and every argument CleanRL lacks with its value,
+so a new argument in a script's `Args` keeps its runs apart with no table to extend; a fork's new
+argument and a fork's script also name its default run directory. Plain Python: nothing of the paper study."""
 
 import functools
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 from pgg_utils import scripts
 from pgg_utils.arguments import RUN_ONLY_ARGS, env_id_in_path
@@ -83,20 +86,6 @@ def variant_id(args: dict) -> str:
     return "pgg_" + "_".join(parts) if parts else "ppo"
 
 
-def training_words(ckpt: dict) -> list[str]:
-    """`key=value` for every training argument of a checkpoint outside the variant that differs from its
-    frozen default (FROZEN_DEFAULTS of its action space), and for every argument those lack (a fork's
-    new one) whatever its value, sorted by name: two values of a fork's argument are two labels, whatever
-    the fork's default was when each ran. One an older checkpoint lacks counts as the default."""
-    args, defaults = ckpt["args"], FROZEN_DEFAULTS.get(ckpt.get("action_space"), {})
-    words = []
-    for key in sorted((defaults.keys() | args.keys()) - RUN_ONLY_ARGS - VARIANT_ARGS - {"env_id", "seed"}):
-        value = args.get(key, defaults.get(key))
-        if key not in defaults or normalised(value) != normalised(defaults[key]):
-            words.append(f"{key}={format_arg(value)}")
-    return words
-
-
 def normalised(value):
     return tuple(value) if isinstance(value, list) else value
 
@@ -107,46 +96,148 @@ def format_arg(value) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def run_name(args) -> str:
-    """The default run directory name: `{env_id}__{exp_name}__g1.1__p0__s1`, with the schedule in place
-    of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`), `__goal` (or `__null4-5`) for partial null inputs and
-    `__bc0.1` for behaviour cloning by the null branch;
-    a namespaced id's ':' and '/' become '-' (arguments.env_id_in_path)."""
-    values = vars(args)
-    null = "".join(f"__{part}" for part in (null_part(values), cloning_part(values)) if part)
-    return f"{env_id_in_path(args.env_id)}__{args.exp_name}__{guidance_part(values)}__p{args.cond_dropout:g}{null}__s{args.seed}"
+# The experiment name of the repository's own scripts: their runs' directories have always held it.
+ORIGINALS_EXPERIMENT = "ppo_pgg"
+# What a run directory of a null embedding fitted after training (pgg_utils.bc_null) adds to its source run's name.
+FITTED_NULL_SUFFIX = "__bcnull"
+
+
+@dataclass(frozen=True)
+class Configuration:
+    """What a run is, built once from its script and its arguments (`of_checkpoint`, `of_run`), and all
+    that is derived from it: `run_name`, `variant`, `label`, `key` (what runs are pooled by), `fields`
+    (the sweep's columns) and `differing` (what a resume compares)."""
+
+    kind: str
+    """discrete or continuous, the action space its script trains"""
+    script: str
+    """its script as a checkpoint records it (scripts.script_name): a file name, or an absolute path"""
+    args: dict
+    """every argument, run-only ones included, with env_id"""
+    null_fitted: bool = False
+    """its null embedding was fitted after training (pgg_utils.bc_null), not trained"""
+    versions: dict | None = field(default=None, compare=False)
+    """the package versions that trained it; None: unknown (a format-1 checkpoint, or a run not yet trained)"""
+
+    @classmethod
+    def of_checkpoint(cls, ckpt: dict) -> "Configuration":
+        return cls(ckpt.get("action_space"), scripts.script_name(ckpt), {"env_id": ckpt["env_id"], **ckpt["args"]},
+                   bool(ckpt.get("null_fit")), ckpt.get("versions"))  # fmt: skip
+
+    @classmethod
+    def of_run(cls, script: str | Path, kind: str, args) -> "Configuration":
+        """The configuration a training script `script` starts with `args` (its parsed `Args`)."""
+        return cls(kind, scripts.recorded_path(Path(script)), asdict(args))
+
+    @property
+    def is_original(self) -> bool:
+        """Whether the repository's own script for its action space trains it."""
+        return self.script == f"{scripts.ORIGINALS.get(self.kind)}.py"
+
+    @property
+    def experiment(self) -> str:
+        """--exp-name, or its default: CleanRL's, the script's file stem (`ppo_pgg_relu`), and for the
+        repository's two scripts `ppo_pgg`, the name their runs have always had."""
+        if self.args.get("exp_name"):
+            return self.args["exp_name"]
+        return ORIGINALS_EXPERIMENT if self.is_original else Path(self.script).stem
+
+    @property
+    def variant(self) -> str:
+        return variant_id(self.args)
+
+    def new_arguments(self) -> dict:
+        """The training arguments CleanRL's scripts lack (FROZEN_DEFAULTS), a fork's, with their values."""
+        frozen = FROZEN_DEFAULTS.get(self.kind, {})
+        skip = RUN_ONLY_ARGS | VARIANT_ARGS | {"env_id", "seed"} | frozen.keys()
+        return {key: self.args[key] for key in sorted(self.args.keys() - skip)}
+
+    def training_words(self) -> list[str]:
+        """`key=value` for every training argument outside the variant that differs from its frozen
+        default (FROZEN_DEFAULTS of its action space), and for every argument those lack (a fork's new
+        one) whatever its value, sorted by name: two values of a fork's argument are two labels, whatever
+        the fork's default was when each ran. One an older checkpoint lacks counts as the default."""
+        args, defaults = self.args, FROZEN_DEFAULTS.get(self.kind, {})
+        words = []
+        for key in sorted((defaults.keys() | args.keys()) - RUN_ONLY_ARGS - VARIANT_ARGS - {"env_id", "seed"}):
+            value = args.get(key, defaults.get(key))
+            if key not in defaults or normalised(value) != normalised(defaults[key]):
+                words.append(f"{key}={format_arg(value)}")
+        return words
+
+    @property
+    def label(self) -> str:
+        """The configuration as a label, the key every reader pools runs by: its variant,
+        `script=<file>` where a script other than the repository's own for its action space trained it,
+        `null=bc` where its null embedding was fitted after training (pgg_utils.bc_null),
+        every training argument that differs from its default (training_words),
+        then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint
+        records no package versions (format 1), so that it is never pooled with runs whose stack is known.
+        Left out: env_id and seed (a table's rows and columns) and the run-only arguments. E.g. `pgg_g1.1
+        learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`, `pgg_g1.1 script=ppo_pgg_relu.py`."""
+        words = [self.variant]
+        if not self.is_original:
+            words.append(f"script={self.script}")
+        if self.null_fitted:
+            words.append("null=bc")
+        words += self.training_words()
+        if not self.versions:
+            words.append("versions=unknown")
+        elif self.versions.get("mujoco") and is_mujoco(self.args["env_id"]):
+            words.append(f"mujoco={self.versions['mujoco']}")
+        return " ".join(words)
+
+    @property
+    def run_name(self) -> str:
+        """The default run directory name: `{env_id}__{experiment}__g1.1__p0__s1`, with the schedule in place
+        of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`), `__goal` (or `__null4-5`) for partial null inputs,
+        `__bc0.1` for behaviour cloning by the null branch and `__{name}{value}` for each argument a fork
+        adds (new_arguments), so a fork and each value of its argument get a directory of their own;
+        a namespaced id's ':' and '/' become '-' (arguments.env_id_in_path)."""
+        args = self.args
+        parts = [null_part(args), cloning_part(args), *(f"{k}{format_arg(v)}" for k, v in self.new_arguments().items())]
+        extra = "".join(f"__{part}" for part in parts if part)
+        return (f"{env_id_in_path(args['env_id'])}__{self.experiment}__{guidance_part(args)}"
+                f"__p{args.get('cond_dropout', 0.0):g}{extra}__s{args['seed']}")  # fmt: skip
+
+    def fields(self) -> dict:
+        """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration`
+        reads them back): its variant, its label, its γ_train (the first, for a schedule) and dropout."""
+        return {"variant": self.variant, "config": self.label, "train_guidance": float(self.args["guidance"]),
+                "cond_dropout": float(self.args.get("cond_dropout", 0.0))}  # fmt: skip
+
+    def training_arguments(self, script_defaults: dict) -> dict:
+        """The arguments that decide what the run learns, by name: one this configuration lacks (an older
+        checkpoint's) at its frozen default, or else at `script_defaults` (its script's `Args()`)."""
+        frozen = FROZEN_DEFAULTS.get(self.kind, {})
+        names = (self.args.keys() | script_defaults.keys()) - RUN_ONLY_ARGS
+        return {name: self.args.get(name, frozen.get(name, script_defaults.get(name))) for name in sorted(names)}
+
+    def differing(self, wanted: "Configuration", script_defaults: dict) -> list[str]:
+        """What a resume compares: `script a -> b` where another script would continue this run, and
+        `name recorded -> wanted` for each training argument in which `wanted` differs from it."""
+        differing = (
+            [] if Path(self.script).name == Path(wanted.script).name else [f"script {self.script} -> {wanted.script}"]
+        )
+        recorded, asked = self.training_arguments(script_defaults), wanted.training_arguments(script_defaults)
+        return differing + [f"{name} {recorded[name]!r} -> {asked[name]!r}" for name in asked
+                            if normalised(recorded.get(name)) != normalised(asked[name])]  # fmt: skip
 
 
 def config_label(ckpt: dict) -> str:
-    """A checkpoint's configuration as a label, the key every reader pools runs by: its variant,
-    `script=<file>` where a script other than the repository's own for its action space trained it,
-    `null=bc` where its null embedding was fitted after training (pgg_utils.bc_null),
-    every training argument that differs from its default (training_words),
-    then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint
-    records no package versions (format 1), so that it is never pooled with runs whose stack is known.
-    Left out: env_id and seed (a table's rows and columns) and the run-only arguments. E.g. `pgg_g1.1
-    learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`, `pgg_g1.1 script=ppo_pgg_relu.py`."""
-    args = {"env_id": ckpt["env_id"], **ckpt["args"]}
-    words = [variant_id(args)]
-    if not scripts.is_original(ckpt):
-        words.append(f"script={scripts.script_name(ckpt)}")
-    if ckpt.get("null_fit"):  # a null embedding fitted after training (pgg_utils.bc_null), not the trained one
-        words.append("null=bc")
-    words += training_words(ckpt)
-    versions = ckpt.get("versions")
-    if not versions:
-        words.append("versions=unknown")
-    elif versions.get("mujoco") and is_mujoco(ckpt["env_id"]):
-        words.append(f"mujoco={versions['mujoco']}")
-    return " ".join(words)
+    """A checkpoint's configuration label (Configuration.label)."""
+    return Configuration.of_checkpoint(ckpt).label
 
 
 def configuration_fields(ckpt: dict) -> dict:
-    """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration`
-    reads them back): its variant, its config label, its γ_train (the first, for a schedule) and dropout."""
-    args = {"env_id": ckpt["env_id"], **ckpt["args"]}
-    return {"variant": variant_id(args), "config": config_label(ckpt),
-            "train_guidance": float(args["guidance"]), "cond_dropout": float(args.get("cond_dropout", 0.0))}  # fmt: skip
+    """A checkpoint's sweep columns (Configuration.fields)."""
+    return Configuration.of_checkpoint(ckpt).fields()
+
+
+def run_of(ckpt: dict, path: str | Path) -> str:
+    """The name of the run a checkpoint file belongs to, wherever it lies: the name it records, or, for a
+    checkpoint from before it recorded one, its run directory's (`<run>/checkpoints/step_*.pt`)."""
+    return ckpt.get("run") or Path(path).parent.parent.name
 
 
 def configuration(row: dict) -> tuple:

@@ -5,7 +5,7 @@ import json
 import re
 from pathlib import Path
 
-from pgg_utils.arguments import RUN_ONLY_ARGS, training_arguments
+from pgg_utils.arguments import RUN_ONLY_ARGS
 from pgg_utils.checkpoints import checkpoint_step, last_readable
 
 # What else the training scripts write into a run directory: TensorBoard's events, and RecordVideo's
@@ -85,10 +85,3 @@ def record_error(run_dir: Path, ckpt: dict | None = None) -> str | None:
     if differing:
         return f"{Path(run_dir) / 'args.json'} disagrees with the run's checkpoints: {', '.join(differing)}"
     return None
-
-
-def differing_arguments(recorded: dict, wanted: dict, defaults: dict) -> list[str]:
-    """`name recorded -> wanted` for each training argument in which a run's checkpoint differs from the
-    arguments it is asked to continue with: the runs a training script refuses to continue."""
-    recorded, wanted = training_arguments(recorded, defaults), training_arguments(wanted, defaults)
-    return [f"{name} {recorded[name]!r} -> {wanted[name]!r}" for name in wanted if recorded[name] != wanted[name]]

@@ -9,7 +9,7 @@ import os
 import sys
 import threading
 from collections import deque
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -33,13 +33,12 @@ from pgg_utils.checkpoints import (
 )
 from pgg_utils.checks import argument_error
 from pgg_utils.files import LockedError, exit_status, lock_directory, write_atomic
-from pgg_utils.identity import run_name
+from pgg_utils.identity import Configuration
 from pgg_utils.progress import Progress
 from pgg_utils.rundir import (
     NonFiniteError,
     RunDirError,
     as_json,
-    differing_arguments,
     project_files,
     read_args_json,
     record_error,
@@ -57,8 +56,11 @@ class Run:
     check runs before anything is deleted. A finished run is left as it is."""
 
     def __init__(self, args, kind: str, script: Path):
-        self.args, self.kind, self.script = args, kind, Path(script)
-        self.dir = Path(args.output_dir) / (args.run_name or run_name(args))
+        self.kind, self.script = kind, Path(script)
+        # --exp-name's default is the script's (Configuration.experiment), resolved once for every record
+        self.args = replace(args, exp_name=Configuration.of_run(script, kind, args).experiment)
+        self.config = Configuration.of_run(script, kind, self.args)
+        self.dir = Path(args.output_dir) / (args.run_name or self.config.run_name)
         self.lock = None
         self.resume_from: Path | None = None
         self.finished = False
@@ -123,7 +125,12 @@ class Run:
         for folder in sorted({path.parent for path in earlier}, key=lambda f: -len(f.parts)):
             if folder != self.dir and not any(folder.iterdir()):  # emptied of what the scripts wrote
                 folder.rmdir()
-        write_atomic(self.dir / "args.json", json.dumps(asdict(args), indent=2))
+        write_atomic(self.dir / "args.json", json.dumps(self.recorded_arguments(), indent=2))
+
+    def recorded_arguments(self) -> dict:
+        """The arguments as args.json and the checkpoints record them: --output-dir relative to the run
+        directory, so that no record holds a folder of the machine that trained it."""
+        return {**asdict(self.args), "output_dir": os.path.relpath(self.args.output_dir, self.dir)}
 
     def check_restartable(self, earlier: list[Path]) -> None:
         """Raises RunDirError unless a fresh start without --overwrite may replace `earlier`, the events and
@@ -136,7 +143,7 @@ class Run:
         if recorded is None:
             raise RunDirError(f"{self.dir} holds {what} but no args.json to tell whose: pass --overwrite to replace "
                               "them, or choose another --run-name")  # fmt: skip
-        if differing := differing_arguments(recorded, as_json(asdict(self.args)), as_json(self.defaults())):
+        if differing := self.differing(recorded):
             raise RunDirError(f"{self.dir} holds {what} of a run with other arguments ({', '.join(differing)}): "
                               "choose another --run-name, or pass --overwrite to replace them")  # fmt: skip
 
@@ -156,12 +163,19 @@ class Run:
         if bad := non_finite(ckpt["model"]):
             raise RunDirError(f"{latest} holds non-finite weights ({', '.join(bad[:3])}): the run diverged, and continuing "
                               "it would diverge again; choose another --run-name, or pass --overwrite")  # fmt: skip
-        differing = differing_arguments(ckpt.get("args", {}), asdict(args), self.defaults())
-        if differing:
+        trained_by = Configuration.of_checkpoint(ckpt).script
+        if Path(trained_by).name != self.script.name:
+            raise RunDirError(f"{self.dir} holds a run that {trained_by} trained, not {self.script.name}: continue it "
+                              "with its own script, or choose another --run-name, or pass --overwrite")  # fmt: skip
+        if differing := self.differing(ckpt.get("args", {})):
             raise RunDirError(
                 f"{self.dir} holds a run with other arguments ({', '.join(differing)}): "
                 "choose another --run-name, or pass --overwrite to replace it"
             )
+        trained_sha1 = ckpt.get("code", {}).get("script_sha1")
+        if args.resume and trained_sha1 and trained_sha1 != self.code["script_sha1"]:
+            self.notes.append(f"{self.script.name} has changed since {latest.name} was written (sha1 {trained_sha1[:10]} "
+                              f"-> {self.code['script_sha1'][:10]}): the checkpoints it writes record the new code")  # fmt: skip
         if not args.resume:
             finished = checkpoint_path(self.dir, args.total_timesteps).exists()
             state = "a finished run" if finished else f"an unfinished run (last checkpoint {latest.name})"
@@ -170,8 +184,12 @@ class Run:
         if "resume" not in ckpt:
             raise RunDirError(f"{latest} predates resumable checkpoints: pass --overwrite to start over")
 
-    def defaults(self) -> dict:
-        return asdict(type(self.args)())
+    def differing(self, recorded: dict) -> list[str]:
+        """The training arguments in which `recorded` (a checkpoint's or args.json's) differ from this run's
+        (Configuration.differing)."""
+        theirs = Configuration(self.kind, self.config.script, as_json(recorded))
+        ours = Configuration(self.kind, self.config.script, as_json(self.recorded_arguments()))
+        return theirs.differing(ours, as_json(asdict(type(self.args)())))
 
     def close(self) -> None:
         if self.progress is not None:
@@ -275,7 +293,8 @@ class Run:
             **shapes,
             "global_step": int(global_step),
             "step_mark": int(mark),
-            "args": asdict(self.args),
+            "run": self.dir.name,
+            "args": self.recorded_arguments(),
             "versions": package_versions(),
             "machine": self.machine,
             "code": self.code,
@@ -307,7 +326,7 @@ def train_in_process(script, args) -> Path:
     run = Run.prepare(args, script.ACTION_SPACE, Path(script.__file__))
     try:
         if not run.finished:
-            script.train(args, run)
+            script.train(run.args, run)
     finally:
         run.close()
     return run.dir
@@ -346,7 +365,7 @@ def launch(args, kind: str, script: str, train) -> None:
         return
     try:
         ctrl_c_handled()
-        train(args, run)
+        train(run.args, run)
     except (KeyboardInterrupt, OSError, NonFiniteError, CheckpointError) as e:
         latest = latest_checkpoint(run.dir)
         if isinstance(e, KeyboardInterrupt):

@@ -43,11 +43,6 @@ def script_name(ckpt: dict) -> str:
     return f"{stem}.py"
 
 
-def is_original(ckpt: dict) -> bool:
-    """Whether the repository's own script for the checkpoint's action space trained it."""
-    return script_name(ckpt) == f"{ORIGINALS.get(ckpt.get('action_space'))}.py"
-
-
 def original(kind: str):
     """The module of the repository's own training script for `kind` (discrete/continuous) actions."""
     return load_module(REPOSITORY / f"{ORIGINALS[kind]}.py")
@@ -55,6 +50,22 @@ def original(kind: str):
 
 def file_sha1(path: Path) -> str:
     return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+
+
+def given_script_error(paths) -> str | None:
+    """What is wrong with a path given as --script, in one line, or None: it must be an existing Python
+    file (a training script), not a folder, a missing file or another kind of file."""
+    for raw in paths:
+        path = Path(raw)
+        if path.is_dir():
+            return (
+                f"--script {raw} is a folder: pass the training script file itself (--script {path / 'ppo_pgg_x.py'})"
+            )
+        if not path.exists():
+            return f"--script {raw}: no such file"
+        if path.suffix != ".py":
+            return f"--script {raw} is not a Python file (.py): pass the training script that trained the checkpoints"
+    return None
 
 
 def locate(ckpt: dict, given: tuple[Path, ...] = ()) -> Path:

@@ -71,6 +71,29 @@ def from_checkpoint(value):
     return value
 
 
+def generator_state(rng) -> dict:
+    """A task's RNG state, pickle-free: a Generator's bit generator state as it is, or a legacy RandomState's
+    (dm_control's tasks through shimmy) under `random_state`, its key as int64."""
+    if isinstance(rng, np.random.RandomState):
+        state = rng.get_state(legacy=False)
+        return {
+            "random_state": {
+                **state,
+                "state": {**state["state"], "key": torch.from_numpy(state["state"]["key"].astype(np.int64))},
+            }
+        }
+    return rng.bit_generator.state
+
+
+def set_generator_state(rng, state: dict) -> None:
+    """The inverse of generator_state, into `rng` in place."""
+    if "random_state" in state:
+        saved = state["random_state"]
+        rng.set_state({**saved, "state": {**saved["state"], "key": saved["state"]["key"].numpy().astype(np.uint32)}})
+    else:
+        rng.bit_generator.state = state
+
+
 def env_state(envs) -> list[dict]:
     """The state of every sub-env as plain values and tensors (pickle-free): its wrappers' counters and
     statistics, its RNG and, where it is a classic-control or MuJoCo task, the task's own state
@@ -85,7 +108,7 @@ def env_state(envs) -> list[dict]:
         kinds = [type(layer).__name__ for layer in wrapper_chain(env)]
         complete = type(task).__module__.startswith(("gymnasium.envs.classic_control", "gymnasium.envs.mujoco"))
         states.append(
-            {"layers": layers, "layer_kinds": kinds, "rng": task.np_random.bit_generator.state, "complete": complete}
+            {"layers": layers, "layer_kinds": kinds, "rng": generator_state(task.np_random), "complete": complete}
         )
         if hasattr(task, "data"):
             # MuJoCo: every array of mjData, not only the integration state. Quantities derived from
@@ -121,7 +144,7 @@ def restore_env_state(envs, states: list[dict]) -> None:
         for layer, saved in matched_layers(list(wrapper_chain(env)), state):
             for name, value in saved.items():
                 setattr(layer, name, from_checkpoint(value))
-        env.unwrapped.np_random.bit_generator.state = state["rng"]
+        set_generator_state(env.unwrapped.np_random, state["rng"])
         if "mujoco" in state:
             data = env.unwrapped.data
             for name, saved in state["mujoco"].items():

@@ -43,7 +43,7 @@ def test_a_fitted_null_is_swept_as_its_own_configuration_beside_its_source(tmp_p
     run_dir = train(ppo_pgg_discrete, small_args("discrete", tmp_path / "runs", guidance=1.1, cond_dropout=0.0))
     source = checkpoints.checkpoint_path(run_dir, 1536)
     args = bc_null.Args(paths=(str(source),), output=str(tmp_path / "runs" / "bc"), episodes=3)
-    fitted = bc_null.fitted_checkpoint(source, args, ())
+    fitted = bc_null.fitted_checkpoint(source, checkpoints.read_checkpoint_file(source), args, (), "fitted__bcnull")
     assert fitted["null_fit"]["method"] == "behaviour cloning" and fitted["null_fit"]["episodes"] == 3
     assert not torch.equal(fitted["model"]["null_obs"], checkpoints.read_checkpoint_file(source)["model"]["null_obs"])
     assert identity.config_label(fitted).endswith("null=bc num_steps=64 total_timesteps=1536")
@@ -51,7 +51,7 @@ def test_a_fitted_null_is_swept_as_its_own_configuration_beside_its_source(tmp_p
     destination.parent.mkdir(parents=True)
     destination.write_bytes(checkpoints.checkpoint_bytes(fitted))
     with pytest.raises(ValueError, match="already holds a fitted null branch"):
-        bc_null.fitted_checkpoint(destination, args, ())
+        bc_null.fitted_checkpoint(destination, checkpoints.read_checkpoint_file(destination), args, (), "x")
     sweep.sweep(sweep.Args(paths=(str(tmp_path / "runs"),), output=str(tmp_path / "sweep"), gammas=(1.0, 2.0),
                            episodes=2, steps=(1536,)))  # fmt: skip
     summary = files.read_csv(tmp_path / "sweep" / "summary.csv")
@@ -62,4 +62,5 @@ def test_a_partial_null_is_refused(tmp_path):
     args = dataclasses.replace(small_args("continuous", tmp_path / "runs"), env_id="Reacher-v4", null_dims=(4, 5))
     run_dir = train(ppo_pgg_continuous, args)
     with pytest.raises(ValueError, match="replaces some observation dimensions only"):
-        bc_null.fitted_checkpoint(checkpoints.checkpoint_path(run_dir, 768), bc_null.Args(paths=()), ())
+        path = checkpoints.checkpoint_path(run_dir, 768)
+        bc_null.fitted_checkpoint(path, checkpoints.read_checkpoint_file(path), bc_null.Args(paths=()), (), "x")

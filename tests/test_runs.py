@@ -31,6 +31,11 @@ def run_training(kind: str, *flags, **kwargs):
     return run_script(f"{SCRIPTS[kind].__name__}.py", *flags, **kwargs)
 
 
+def default_run_name(args, script: Path = ROOT / "ppo_pgg_discrete.py") -> str:
+    """The run directory name a training script gives `args` without --run-name."""
+    return identity.Configuration.of_run(script, "discrete", args).run_name
+
+
 def prepare(module, args) -> None:
     """Applies the run directory's rules as the script's main does before it trains (RunDirError)."""
     runs.Run.prepare(args, module.ACTION_SPACE, Path(module.__file__)).close()
@@ -126,7 +131,7 @@ def test_a_full_disk_while_saving_is_one_line_naming_the_file_and_leaves_the_pre
         and "No space left on device" in error[0]
         and "step_000000512.pt are kept" in error[0]
     )
-    run_dir = tmp_path / identity.run_name(args)
+    run_dir = tmp_path / default_run_name(args)
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
     ppo_pgg_discrete.load_checkpoint(run_dir / "checkpoints" / "step_000000512.pt")
 
@@ -412,7 +417,7 @@ def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_fi
     code, error = launch(ppo_pgg_discrete, args, capsys)
     assert code == 1 and len(error) == 1, error
     assert "iteration 3 (global step 768): non-finite weights; checkpoints up to step_000000512.pt are kept" in error[0]
-    run_dir = tmp_path / identity.run_name(args)
+    run_dir = tmp_path / default_run_name(args)
     assert [p.name for p in checkpoints.checkpoints_of(run_dir)] == ["step_000000512.pt"]
     # A checkpoint with non-finite weights (from elsewhere) is never continued.
     ckpt = checkpoint(run_dir, 512)
@@ -491,7 +496,7 @@ def test_a_full_disk_under_tensorboard_is_one_line_naming_the_events_file(tmp_pa
     args = small_args("discrete", tmp_path)
     code, error = launch(ppo_pgg_discrete, args, capsys)
     assert code == 1 and len(error) == 1, error
-    (events,) = (tmp_path / identity.run_name(args)).glob("events.out.tfevents.*")
+    (events,) = (tmp_path / default_run_name(args)).glob("events.out.tfevents.*")
     assert error[0] == f"error: cannot write {events}: No space left on device"
 
 
@@ -624,8 +629,8 @@ def test_a_name_built_from_exp_name_is_one_path_component(tmp_path):
 
 
 def test_a_namespaced_id_makes_one_path_component_and_other_names_are_unchanged():
-    assert identity.run_name(ppo_pgg_discrete.Args(env_id="mymod:ns/Env-v0")) == "mymod-ns-Env-v0__ppo_pgg__g1__p0__s1"
-    assert identity.run_name(ppo_pgg_discrete.Args(guidance=1.1, seed=3)) == "CartPole-v1__ppo_pgg__g1.1__p0__s3"
+    assert default_run_name(ppo_pgg_discrete.Args(env_id="mymod:ns/Env-v0")) == "mymod-ns-Env-v0__ppo_pgg__g1__p0__s1"
+    assert default_run_name(ppo_pgg_discrete.Args(guidance=1.1, seed=3)) == "CartPole-v1__ppo_pgg__g1.1__p0__s3"
 
 
 def test_a_misnamed_checkpoint_is_skipped_with_a_line_by_the_resume_and_the_sweep(tmp_path, capsys):
@@ -671,3 +676,80 @@ def test_ctrl_c_while_importing_is_one_line_and_status_130(script, tmp_path):
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode == 130 and stderr.strip() == "interrupted while starting", stderr
     assert not (tmp_path / "out").exists()
+
+
+# --- a configuration built once (issue 50) --------------------------------------------------------------
+
+FORK_ARGUMENT = """    my_coef: float = 0.5
+    \"\"\"a fork's new loss coefficient\"\"\"
+"""
+
+
+def fork(folder: Path, name: str = "ppo_fork.py") -> Path:
+    """A copy of the discrete script, outside the repository, with a new training argument."""
+    text = (ROOT / "ppo_pgg_discrete.py").read_text()
+    anchor = "    total_timesteps: int"
+    assert anchor in text
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / name).write_text(text.replace(anchor, FORK_ARGUMENT + anchor, 1))
+    return folder / name
+
+
+def run_fork(script: Path, *flags) -> subprocess.CompletedProcess:
+    """A fork outside the repository runs with this checkout's package, as an installed project's would."""
+    return subprocess.run([sys.executable, str(script), *flags], capture_output=True, text=True, timeout=300,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)), check=False)  # fmt: skip
+
+
+TINY = ["--total-timesteps", "512", "--num-envs", "1", "--num-steps", "128", "--checkpoint-interval", "256"]
+
+
+def test_a_fork_and_each_value_of_its_new_argument_get_a_run_directory_of_their_own(tmp_path):
+    script, output = fork(tmp_path / "elsewhere"), tmp_path / "runs"
+    for value in ("0.5", "0.7"):
+        proc = run_fork(script, *TINY, "--my-coef", value, "--output-dir", str(output))
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    original = run_script("ppo_pgg_discrete.py", *TINY, "--output-dir", str(output))
+    assert original.returncode == 0, original.stderr[-2000:]
+    assert sorted(p.name for p in output.iterdir()) == [
+        "CartPole-v1__ppo_fork__g1__p0__my_coef0.5__s1",  # CleanRL's --exp-name: the script's file stem
+        "CartPole-v1__ppo_fork__g1__p0__my_coef0.7__s1",
+        "CartPole-v1__ppo_pgg__g1__p0__s1",  # the repository's scripts' runs keep their names
+    ]
+    recorded = checkpoint(output / "CartPole-v1__ppo_fork__g1__p0__my_coef0.7__s1", 512)
+    assert recorded["args"]["exp_name"] == "ppo_fork" and recorded["args"]["my_coef"] == 0.7
+    assert checkpoint(output / "CartPole-v1__ppo_pgg__g1__p0__s1", 512)["args"]["exp_name"] == "ppo_pgg"
+
+
+def test_resume_refuses_a_run_another_script_trained_and_says_when_the_script_changed(tmp_path):
+    script, output = fork(tmp_path / "elsewhere"), tmp_path / "runs"
+    common = [*TINY, "--output-dir", str(output), "--run-name", "shared"]
+    assert run_script("ppo_pgg_discrete.py", *common).returncode == 0
+    checkpoints.checkpoint_path(output / "shared", 512).unlink()
+    proc = run_fork(script, *common, "--resume")
+    line = one_line_error(proc)
+    assert "a run that ppo_pgg_discrete.py trained, not ppo_fork.py" in line
+    assert not checkpoints.checkpoint_path(output / "shared", 512).exists()
+
+    own = [*TINY, "--output-dir", str(output), "--run-name", "forked"]
+    assert run_fork(script, *own).returncode == 0
+    checkpoints.checkpoint_path(output / "forked", 512).unlink()
+    script.write_text(script.read_text() + "\n# an edit after the first checkpoint\n")
+    proc = run_fork(script, *own, "--resume")
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "note: ppo_fork.py has changed since step_000000256.pt was written" in proc.stderr
+    assert (
+        checkpoint(output / "forked", 512)["code"]["script_sha1"]
+        != checkpoint(output / "forked", 256)["code"]["script_sha1"]
+    )
+
+
+def test_resume_compares_what_the_label_compares_an_argument_an_older_checkpoint_lacks_at_its_frozen_default():
+    recorded = identity.Configuration("discrete", "ppo_pgg_discrete.py", {"env_id": "CartPole-v1", "seed": 1})
+    wanted = identity.Configuration.of_run(ROOT / "ppo_pgg_discrete.py", "discrete", ppo_pgg_discrete.Args())
+    defaults = vars(ppo_pgg_discrete.Args())
+    assert recorded.differing(wanted, defaults) == []
+    changed = identity.Configuration.of_run(
+        ROOT / "ppo_pgg_discrete.py", "discrete", ppo_pgg_discrete.Args(discount=0.9)
+    )
+    assert recorded.differing(changed, defaults) == ["discount 0.99 -> 0.9"]
