@@ -104,7 +104,7 @@ from pgg_utils.files import (
     write_atomic,
     write_manifest,
 )
-from pgg_utils.identity import configuration, configuration_fields, is_mujoco
+from pgg_utils.identity import Configuration, configuration, is_mujoco
 from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
 
 ROOT = Path(__file__).resolve().parent
@@ -412,7 +412,7 @@ def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
 def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     """({(env, variant, series): [(steps, returns) per seed]}, [(env, run directory, why) per run left
     out]): the episodic training returns (TensorBoard charts/episodic_return) of the runs under
-    `run_paths`. A run's configuration is its last checkpoint's (identity.configuration_fields: the
+    `run_paths`. A run's configuration is its last checkpoint's (identity.Configuration.key: the
     script and every training argument, the sweep's and the tables' key), and its series is labelled as
     the tables label theirs (config_labels), so a curve and a table row of one configuration carry one
     name. Only whole runs are drawn: a run whose events hold no episodic returns (missing or damaged) or
@@ -440,8 +440,7 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
             left_out.append((run_args.get("env_id", "?"), run_dir, why))
             continue
         events = accumulator.Scalars("charts/episodic_return")
-        fields = configuration_fields(ckpt)
-        config = (ckpt["env_id"], fields["variant"], fields["config"], fields["train_guidance"], fields["cond_dropout"])
+        config = Configuration.of_checkpoint(ckpt).key
         steps, returns = np.array([e.step for e in events]), np.array([e.value for e in events])
         found.append((config, run_args["seed"], steps, returns, run_dir))
     if not found:

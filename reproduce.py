@@ -42,7 +42,7 @@ import eval_gamma_sweep
 import plot_results
 from paper_study import paper
 from pgg_utils import checkpoints, checks, processes, scripts
-from pgg_utils.arguments import env_id_in_path, guidance_error
+from pgg_utils.arguments import guidance_error
 from pgg_utils.files import (
     RECORD,
     InputError,
@@ -53,7 +53,7 @@ from pgg_utils.files import (
     one_line_errors,
     write_atomic,
 )
-from pgg_utils.identity import Configuration
+from pgg_utils.identity import Configuration, grid_run_name
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
@@ -188,7 +188,7 @@ class RunSpec:
 
     @property
     def name(self) -> str:
-        return f"{env_id_in_path(self.env_id)}__{self.variant}__s{self.seed}"
+        return grid_run_name(self.env_id, self.variant, self.seed)
 
     @property
     def run_dir(self) -> Path:

@@ -206,6 +206,11 @@ class Configuration:
         return {"variant": self.variant, "config": self.label, "train_guidance": float(self.args["guidance"]),
                 "cond_dropout": float(self.args.get("cond_dropout", 0.0))}  # fmt: skip
 
+    @property
+    def key(self) -> tuple:
+        """What runs are pooled by (`configuration`, the same key of a sweep's row)."""
+        return configuration({"env_id": self.args["env_id"], **self.fields()})
+
     def training_arguments(self, script_defaults: dict) -> dict:
         """The arguments that decide what the run learns, by name: one this configuration lacks (an older
         checkpoint's) at its frozen default, or else at `script_defaults` (its script's `Args()`)."""
@@ -232,6 +237,12 @@ def config_label(ckpt: dict) -> str:
 def configuration_fields(ckpt: dict) -> dict:
     """A checkpoint's sweep columns (Configuration.fields)."""
     return Configuration.of_checkpoint(ckpt).fields()
+
+
+def grid_run_name(env_id: str, variant: str, seed: int) -> str:
+    """The name reproduce.py gives a run of its grid, `CartPole-v1__pgg_g1.1__s1` (the shipped agents'
+    folders): the grid fixes the script and every other argument, so the variant and seed name it."""
+    return f"{env_id_in_path(env_id)}__{variant}__s{seed}"
 
 
 def run_of(ckpt: dict, path: str | Path) -> str:

@@ -300,3 +300,140 @@ def test_reproduce_trains_and_sweeps_a_namespaced_id_in_one_directory_per_run(tm
     (run_dir,) = (tmp_path / "runs").glob("newcomer46*")
     assert run_dir.name == "newcomer46-ns46-Line-v0__ppo__s1" and checkpoints.checkpoints_of(run_dir)
     assert "| newcomer46:ns46/Line-v0 |" in (tmp_path / "results" / "table_discrete.md").read_text()
+
+
+# --- issue 51: round four ------------------------------------------------------------------------------
+
+
+def tiny_run(tmp_path, **overrides) -> Path:
+    from conftest import small_args, train
+
+    return train(ppo_pgg_discrete, small_args("discrete", tmp_path, **overrides))
+
+
+def test_a_checkpoint_copied_elsewhere_keeps_its_own_runs_name(tmp_path):
+    run_dir = tiny_run(tmp_path / "runs", run_name="nc4", total_timesteps=512)
+    moved = tmp_path / "elsewhere" / "moved" / "mycartpole.pt"
+    moved.parent.mkdir(parents=True)
+    shutil.copy(checkpoints.checkpoint_path(run_dir, 512), moved)
+    sweep.sweep(sweep.Args(paths=(str(moved),), output=str(tmp_path / "sweep"), gammas=(1.0,), episodes=1))
+    assert {row["run"] for row in files.read_csv(tmp_path / "sweep" / "episodes.csv")} == {"nc4"}
+    assert {row["run"] for row in files.read_csv(tmp_path / "sweep" / "evaluated_by.csv")} == {"nc4"}
+
+
+def test_new_checkpoints_record_no_folder_of_the_machine_that_trained_them(tmp_path):
+    run_dir = tiny_run(tmp_path.resolve() / "out", total_timesteps=512)
+    ckpt = torch.load(checkpoints.checkpoint_path(run_dir, 512), weights_only=True)
+    assert ckpt["args"]["output_dir"] == ".." and ckpt["run"] == run_dir.name  # relative to the run directory
+    metadata = {key: value for key, value in ckpt.items() if key not in ("model", "resume")}
+    assert str(tmp_path.resolve()) not in repr(metadata)
+    assert str(tmp_path.resolve()) not in (run_dir / "args.json").read_text()
+
+
+@pytest.mark.parametrize(
+    "make,what",
+    [
+        (lambda p: p.mkdir() or p, "is a folder"),
+        (lambda p: p / "missing.py", "no such file"),
+        (lambda p: (p.write_text("x"), p)[1], "is not a Python file (.py)"),
+    ],
+)
+def test_a_script_path_that_is_not_a_python_file_is_named_for_what_it_is(make, what, tmp_path):
+    given = make(tmp_path / "fork")
+    for command in (
+        ["eval_gamma_sweep.py", str(FORMAT_2), "--output", str(tmp_path / "sweep")],
+        ["-m", "pgg_utils.bc_null", str(FORMAT_2), "--output", str(tmp_path / "bc")],
+    ):
+        proc = subprocess.run([sys.executable, *command, "--script", str(given)], capture_output=True, text=True,
+                              cwd=ROOT, timeout=120, check=False)  # fmt: skip
+        line = one_line_error(proc)
+        assert f"--script {given}" in line and what in line, line
+    assert not (tmp_path / "sweep").exists() and not (tmp_path / "bc").exists()
+
+
+def bc_null_cli(*flags) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "pgg_utils.bc_null", *flags], capture_output=True, text=True,
+                          cwd=ROOT, timeout=120, check=False)  # fmt: skip
+
+
+def test_bc_null_exits_2_with_the_reason_where_it_would_write_nothing(tmp_path):
+    assert "no run directories, roots or checkpoint files given" in one_line_error(bc_null_cli())
+    assert "--episode-seed must be a non-negative integer" in one_line_error(
+        bc_null_cli(str(FORMAT_2), "--episode-seed", "-5", "--output", str(tmp_path / "bc"))
+    )
+    forked = torch.load(FORMAT_2, weights_only=True) | {"script_path": "/nowhere/ppo_fork.py"}
+    path = tmp_path / "forked" / "checkpoints" / FORMAT_2.name
+    path.parent.mkdir(parents=True)
+    path.write_bytes(checkpoints.checkpoint_bytes(forked))
+    line = one_line_error(bc_null_cli(str(path), "--output", str(tmp_path / "bc"), "--episodes", "1"))
+    assert str(path) in line and "--script" in line
+    assert not (tmp_path / "bc").exists()
+
+
+@pytest.mark.parametrize(
+    "flag,answer",
+    [
+        ("--gamma=0.9", "--discount"),
+        ("--cuda", "CPU only"),
+        ("--batch-size", "--num-envs × --num-steps"),
+        ("--minibatch_size", "--num-minibatches"),
+        ("--no-save-model", "always saved"),
+    ],
+)
+def test_cleanrls_habitual_flags_are_answered_in_one_line(flag, answer, tmp_path):
+    line = one_line_error(run_script("ppo_pgg_discrete.py", flag, "--output-dir", str(tmp_path)))
+    assert answer in line and line.startswith(f"error: {flag.split('=')[0]}")
+    assert not any(tmp_path.iterdir())
+
+
+def test_cleanrls_flags_whose_meaning_holds_are_accepted_with_a_note():
+    proc = run_script("ppo_pgg_continuous.py", "--no_cuda", "--save-model", "--help")
+    assert proc.returncode == 0 and "--discount" in proc.stdout
+    assert "note: --no_cuda: these scripts train on the CPU only" in proc.stderr and "note: --save-model" in proc.stderr
+
+
+class LegacyRandomTask(gym.Env):
+    """A task whose RNG is a legacy RandomState, as dm_control's through shimmy."""
+
+    observation_space = gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
+    action_space = gym.spaces.Discrete(2)
+
+    def __init__(self, render_mode=None):
+        self.render_mode, self.random_state = render_mode, np.random.RandomState(0)
+
+    @property
+    def np_random(self):
+        return self.random_state
+
+    def observe(self):
+        return self.random_state.uniform(-1, 1, 3).astype(np.float32)
+
+    def reset(self, seed=None, options=None):
+        if seed is not None:
+            self.random_state = np.random.RandomState(seed)
+        return self.observe(), {}
+
+    def step(self, action):
+        return self.observe(), float(action), False, False, {}
+
+
+def test_a_task_whose_rng_is_a_legacy_random_state_is_saved_and_restored(tmp_path):
+    gym.register("LegacyRandomTask-v0", entry_point=LegacyRandomTask, max_episode_steps=20)
+    run_dir = tiny_run(tmp_path, env_id="LegacyRandomTask-v0", run_name="legacy")
+    ckpt = torch.load(checkpoints.checkpoint_path(run_dir, 512), weights_only=True)
+    (saved,) = {env["rng"]["random_state"]["bit_generator"] for env in ckpt["resume"]["envs"]}
+    assert saved == "MT19937"
+    from pgg_utils import training_state
+
+    task = LegacyRandomTask()
+    training_state.set_generator_state(task.np_random, ckpt["resume"]["envs"][0]["rng"])
+    again = LegacyRandomTask()
+    training_state.set_generator_state(again.np_random, training_state.generator_state(task.np_random))
+    assert np.array_equal(task.observe(), again.observe())
+    checkpoints.checkpoint_path(run_dir, 1536).unlink()
+    from conftest import small_args, train
+
+    train(
+        ppo_pgg_discrete, small_args("discrete", tmp_path, env_id="LegacyRandomTask-v0", run_name="legacy", resume=True)
+    )
+    assert checkpoints.checkpoint_path(run_dir, 1536).exists()
