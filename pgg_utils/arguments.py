@@ -23,7 +23,7 @@ class RunArgs:
     and how the run is recorded."""
 
     exp_name: str | None = None
-    """the name of this experiment, part of the run directory's name, and what TensorBoard and W&B runs are grouped by; None: CleanRL's default, the script's file stem (`ppo_pgg_relu` for a fork), and `ppo_pgg` for the repository's two scripts, as their runs have always been named"""
+    """the name of this experiment, what W&B and TensorBoard runs are grouped by, and part of the run directory's name; None: CleanRL's default, the script's file stem, with the variant (`ppo_pgg_discrete__pgg_g1.1`, `ppo_relu__ppo`); the run directory then holds the file stem (`ppo_pgg` for the repository's two scripts, as their runs always have)"""
     seed: int = 1
     """seed of the experiment (torch, numpy, random and the environments)"""
     torch_deterministic: bool = True

@@ -96,7 +96,7 @@ def format_arg(value) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-# The experiment name of the repository's own scripts: their runs' directories have always held it.
+# What the run directories of the repository's own scripts have always held after the env (run_stem).
 ORIGINALS_EXPERIMENT = "ppo_pgg"
 # What a run directory of a null embedding fitted after training (pgg_utils.bc_null) adds to its source run's name.
 FITTED_NULL_SUFFIX = "__bcnull"
@@ -135,11 +135,24 @@ class Configuration:
         return self.script == f"{scripts.ORIGINALS.get(self.kind)}.py"
 
     @property
+    def default_experiment(self) -> str:
+        """--exp-name's default, what TensorBoard and W&B runs are grouped by: CleanRL's, the script's file
+        stem, with the variant, so that it tells scripts and variants apart (`ppo_pgg_discrete__pgg_g1.1`,
+        `ppo_relu__ppo`)."""
+        return f"{Path(self.script).stem}__{self.variant}"
+
+    @property
     def experiment(self) -> str:
-        """--exp-name, or its default: CleanRL's, the script's file stem (`ppo_pgg_relu`), and for the
-        repository's two scripts `ppo_pgg`, the name their runs have always had."""
-        if self.args.get("exp_name"):
-            return self.args["exp_name"]
+        """--exp-name as given, or its default (default_experiment)."""
+        return self.args.get("exp_name") or self.default_experiment
+
+    @property
+    def run_stem(self) -> str:
+        """What the default run name holds after the env: --exp-name where one was given, else the script's
+        file stem, and `ppo_pgg` for the repository's two scripts, the name their runs have always had."""
+        given = self.args.get("exp_name")
+        if given and given != self.default_experiment:
+            return given
         return ORIGINALS_EXPERIMENT if self.is_original else Path(self.script).stem
 
     @property
@@ -189,7 +202,7 @@ class Configuration:
 
     @property
     def run_name(self) -> str:
-        """The default run directory name: `{env_id}__{experiment}__g1.1__p0__s1`, with the schedule in place
+        """The default run directory name: `{env_id}__{run_stem}__g1.1__p0__s1`, with the schedule in place
         of `g1.1` (`g1to1.2`, `adaptive1.1_kl0.02`), `__goal` (or `__null4-5`) for partial null inputs,
         `__bc0.1` for behaviour cloning by the null branch and `__{name}{value}` for each argument a fork
         adds (new_arguments), so a fork and each value of its argument get a directory of their own;
@@ -197,7 +210,7 @@ class Configuration:
         args = self.args
         parts = [null_part(args), cloning_part(args), *(f"{k}{format_arg(v)}" for k, v in self.new_arguments().items())]
         extra = "".join(f"__{part}" for part in parts if part)
-        return (f"{env_id_in_path(args['env_id'])}__{self.experiment}__{guidance_part(args)}"
+        return (f"{env_id_in_path(args['env_id'])}__{self.run_stem}__{guidance_part(args)}"
                 f"__p{args.get('cond_dropout', 0.0):g}{extra}__s{args['seed']}")  # fmt: skip
 
     def fields(self) -> dict:

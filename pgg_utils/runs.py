@@ -57,10 +57,10 @@ class Run:
 
     def __init__(self, args, kind: str, script: Path):
         self.kind, self.script = kind, Path(script)
-        # --exp-name's default is the script's (Configuration.experiment), resolved once for every record
-        self.args = replace(args, exp_name=Configuration.of_run(script, kind, args).experiment)
-        self.config = Configuration.of_run(script, kind, self.args)
+        self.config = Configuration.of_run(script, kind, args)
         self.dir = Path(args.output_dir) / (args.run_name or self.config.run_name)
+        # --exp-name's default (Configuration.experiment), resolved once for every record and for W&B
+        self.args = replace(args, exp_name=self.config.experiment)
         self.lock = None
         self.resume_from: Path | None = None
         self.finished = False

@@ -712,13 +712,13 @@ def test_a_fork_and_each_value_of_its_new_argument_get_a_run_directory_of_their_
     original = run_script("ppo_pgg_discrete.py", *TINY, "--output-dir", str(output))
     assert original.returncode == 0, original.stderr[-2000:]
     assert sorted(p.name for p in output.iterdir()) == [
-        "CartPole-v1__ppo_fork__g1__p0__my_coef0.5__s1",  # CleanRL's --exp-name: the script's file stem
+        "CartPole-v1__ppo_fork__g1__p0__my_coef0.5__s1",  # the script's file stem, as CleanRL's --exp-name
         "CartPole-v1__ppo_fork__g1__p0__my_coef0.7__s1",
         "CartPole-v1__ppo_pgg__g1__p0__s1",  # the repository's scripts' runs keep their names
     ]
     recorded = checkpoint(output / "CartPole-v1__ppo_fork__g1__p0__my_coef0.7__s1", 512)
-    assert recorded["args"]["exp_name"] == "ppo_fork" and recorded["args"]["my_coef"] == 0.7
-    assert checkpoint(output / "CartPole-v1__ppo_pgg__g1__p0__s1", 512)["args"]["exp_name"] == "ppo_pgg"
+    assert recorded["args"]["exp_name"] == "ppo_fork__ppo" and recorded["args"]["my_coef"] == 0.7  # W&B's grouping
+    assert checkpoint(output / "CartPole-v1__ppo_pgg__g1__p0__s1", 512)["args"]["exp_name"] == "ppo_pgg_discrete__ppo"
 
 
 def test_resume_refuses_a_run_another_script_trained_and_says_when_the_script_changed(tmp_path):
