@@ -150,8 +150,8 @@ def argument_error(args: Args) -> str | None:
             return f"--{name.replace('_', '-')} must be positive, got {getattr(args, name)}"
     if not (math.isfinite(args.learning_rate) and args.learning_rate > 0):
         return f"--learning-rate must be a finite number > 0, got {args.learning_rate}"
-    if not 0 <= args.episode_seed < 2**32 - 10**6:
-        return f"--episode-seed must be a non-negative integer below 2**32 - 10**6 (numpy's seeds), got {args.episode_seed}"
+    if args.episode_seed < 0:
+        return f"--episode-seed must be a non-negative integer (reset seeds), got {args.episode_seed}"
     return scripts.given_script_error(args.script)
 
 

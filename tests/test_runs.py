@@ -753,3 +753,23 @@ def test_resume_compares_what_the_label_compares_an_argument_an_older_checkpoint
         ROOT / "ppo_pgg_discrete.py", "discrete", ppo_pgg_discrete.Args(discount=0.9)
     )
     assert recorded.differing(changed, defaults) == ["discount 0.99 -> 0.9"]
+
+
+def test_the_project_modules_import_one_another_in_no_circle():
+    """identity, runs and scripts imported one another in a circle; every import counts, those inside functions too."""
+    import ast
+
+    graph = {}
+    for path in (ROOT / "pgg_utils").glob("*.py"):
+        imported = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and node.module == "pgg_utils":
+                imported |= {alias.name for alias in node.names}
+            elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pgg_utils."):
+                imported.add(node.module.split(".")[1])
+        graph[path.stem] = imported
+
+    def reaches(start: str, target: str, seen: set) -> bool:
+        return any(d == target or (d not in seen and reaches(d, target, seen | {d})) for d in graph.get(start, ()))
+
+    assert [module for module in graph if reaches(module, module, {module})] == []
