@@ -15,8 +15,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-from pgg_utils.checkpoints import READABLE_FORMAT_VERSIONS, read_checkpoint_file
-
 # The folder that holds the training scripts beside this package: the checkout, or site-packages.
 REPOSITORY = Path(__file__).resolve().parent.parent
 # The repository's own training scripts, by the action space they train.
@@ -162,6 +160,8 @@ def task_sources(env_id: str, env) -> dict[str, str]:
 def load_checkpoint(path, given: tuple[Path, ...] = ()):
     """(agent in eval mode, checkpoint dict) of a checkpoint file of any training script, the agent
     built by the script that trained it (locate). ValueError with one line where that cannot be done."""
+    from pgg_utils.checkpoints import read_checkpoint_file  # torch: only where a checkpoint is read
+
     ckpt = read_checkpoint_file(path)
     return load_agent(ckpt, path, given)[0], ckpt
 
@@ -192,6 +192,8 @@ def code_revision(script: Path) -> dict:
 def require_own(ckpt: dict, kind: str, script: str | Path, source: str | Path = "checkpoint") -> None:
     """ValueError unless `ckpt` is a checkpoint of a readable format trained by `script` (a script of
     `kind` actions, discrete/continuous), or by a script of its file name: a fork's `Agent` is its own."""
+    from pgg_utils.checkpoints import READABLE_FORMAT_VERSIONS  # torch: only where a checkpoint is read
+
     if ckpt.get("format_version") not in READABLE_FORMAT_VERSIONS or ckpt.get("action_space") != kind:
         raise ValueError(f"{source} is not a {kind} PGG checkpoint of format {READABLE_FORMAT_VERSIONS}")
     if Path(script_name(ckpt)).name != Path(script).name:
