@@ -313,7 +313,8 @@ def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  
     For Gaussians the natural parameters mix, precision (1-γ)/σ_null² + γ/σ_s² and precision·mean
     likewise; with one σ for both branches (this Agent's) that is the mean mix `guide` with σ unchanged,
     computed so. Torch tensors or numpy arrays (`guidance` then a number or one per row). A fork that
-    changes the distribution (σ per branch, a squashed Gaussian, a Beta) changes this function."""
+    changes the distribution (σ per branch, a squashed Gaussian, a Beta) changes this function; its distribution
+    has Gaussian's methods (mode, sample and sample_log_prob of noise, log_prob, entropy, kl)."""
     return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std)  # PGG
 
 

@@ -256,7 +256,8 @@ def guided_policy(cond: "Categorical", null: "Categorical", guidance) -> "Catego
     """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution: the loss,
     the rollouts' numpy copy (checked against it when training starts) and `act` all take it from here.
     For categoricals the natural parameters, the logits, mix. Torch tensors or numpy arrays (`guidance`
-    then a number or one per row). A fork that changes the distribution changes this function."""
+    then a number or one per row). A fork that changes the distribution changes this function; its distribution
+    has Categorical's methods (mode, sample and sample_log_prob of noise, log_prob, entropy, kl)."""
     return Categorical(guide(cond.logits, null.logits, guidance))  # PGG
 
 
