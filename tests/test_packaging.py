@@ -40,9 +40,10 @@ def build_backend_here() -> None:
 def test_a_non_editable_install_finds_the_papers_data_from_any_folder(tmp_path):
     """`pip install .` (not -e) of a copy of the repository, then plot_results --compare-paper run as an
     installed module from a folder outside any source tree: it reads the paper's numbers from the
-    installed package and tables the committed discrete sweep exactly as committed. Before the paper's
-    CSVs were package data it stopped with `paper_study/data/paper_results.csv: No such file`; before
-    build/ was ignored the install left it untracked in the tree."""
+    installed package and tables the committed discrete sweep exactly as committed, with its provenance.
+    Before the paper's CSVs were package data it stopped with `paper_study/data/paper_results.csv: No such
+    file`; before build/ was ignored the install left it untracked in the tree; before --provenance looked
+    beside its file, every cell's provenance read "?"."""
     build_backend_here()
     source, site, elsewhere = tmp_path / "source", tmp_path / "site", tmp_path / "elsewhere"
     for path in tracked_files():
@@ -69,11 +70,17 @@ def test_a_non_editable_install_finds_the_papers_data_from_any_folder(tmp_path):
     assert all(Path(line).is_relative_to(site) for line in where.stdout.split()), where.stdout  # not the source tree
     out = tmp_path / "tables"
     plotted = subprocess.run([sys.executable, "-m", "plot_results", str(ROOT / "results" / "discrete"),
-                              "--compare-paper", "--output", str(out)],
+                              "--compare-paper", "--provenance", str(ROOT / "results" / "provenance.csv"),
+                              "--output", str(out)],
                              cwd=elsewhere, env=env, capture_output=True, text=True, timeout=300)  # fmt: skip
     assert plotted.returncode == 0, plotted.stderr
     for name in ("compare_paper.csv", "compare_paper_tasks.csv"):
         assert (out / name).read_bytes() == (ROOT / "results" / "discrete" / name).read_bytes(), name
+    # The provenance's CSVs are found beside the provenance file, not in the installed package's folder.
+    row = next(line for line in (out / "provenance.md").read_text().splitlines() if "discrete/episodes.csv" in line)
+    committed = (ROOT / "results" / "discrete" / "provenance.md").read_text()
+    assert row.split("|")[2:] == next(line for line in committed.splitlines() if "discrete/episodes.csv`" in line
+                                      and "control" not in line).split("|")[2:]  # fmt: skip
 
 
 def test_the_in_tree_build_folder_is_ignored():
