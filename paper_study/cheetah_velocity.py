@@ -8,8 +8,13 @@ difference between the cheetah's forward velocity and the goal, with a control c
 command is part of what the agent sees: gymnasium's HalfCheetah-v4 (its physics, start states and control
 cost, 0.1·Σa²), the commanded forward velocity v_cmd drawn uniformly from COMMAND_RANGE at every reset and
 appended to the observation (index COMMAND_INDEX, the one `--null-dims` takes for a null on the command), and
-the reward −|v − v_cmd| − 0.1·Σa² in place of v − 0.1·Σa², with v HalfCheetah-v4's own forward velocity
-(x displacement over the step's duration). 1000 steps an episode, as HalfCheetah-v4.
+the reward v_cmd − |v − v_cmd| − 0.1·Σa² = min(v, 2·v_cmd − v) − 0.1·Σa² in place of v − 0.1·Σa², with v
+HalfCheetah-v4's own forward velocity (x displacement over the step's duration). That is Finn et al.'s
+−|v − v_cmd| plus the episode's constant v_cmd, which changes no policy's ranking (every episode lasts its
+1000 steps, as HalfCheetah-v4's, and the command is fixed within it), and it makes the reward HalfCheetah-v4's
+own wherever v ≤ v_cmd: standing still earns 0 whatever the command, so the returns' spread does not grow with
+the command, which PPO's reward scaling would divide every signal by (a pilot with −|v − v_cmd| alone had not
+begun to run after 200k steps: results/beyond/command/pilot.txt).
 
 `reset(options={"command": v})` sets the command instead of drawing it (an evaluation's commands inside and
 outside the training range, paper_study/command_tracking.py); the draw is made in either case, after the start
@@ -57,7 +62,7 @@ class HalfCheetahVelocity(HalfCheetahEnv):
 
     def step(self, action):
         observation, _, terminated, truncated, info = super().step(action)
-        tracking = -abs(info["x_velocity"] - self.command)
+        tracking = self.command - abs(info["x_velocity"] - self.command)
         info.update(command=self.command, reward_tracking=tracking)
         return observation, tracking + info["reward_ctrl"], terminated, truncated, info
 

@@ -20,8 +20,8 @@ ACTIONS = np.random.default_rng(0).uniform(-1, 1, size=(30, 6))
 
 def test_the_task_is_halfcheetah_v4_with_the_command_appended_and_a_reward_that_tracks_it():
     """Same physics, start states and control cost as HalfCheetah-v4; the observation gains the command at
-    COMMAND_INDEX; the reward is -|v - v_cmd| - 0.1·Σa² with v HalfCheetah-v4's forward velocity. Fails where the
-    physics, the observation's layout, the reward's sign or its terms change."""
+    COMMAND_INDEX; the reward is v_cmd - |v - v_cmd| - 0.1·Σa² with v HalfCheetah-v4's forward velocity. Fails where
+    the physics, the observation's layout, the reward's sign or its terms change."""
     env, reference = gym.make(ENV_ID), gym.make("HalfCheetah-v4")
     assert env.observation_space.shape == (COMMAND_INDEX + 1,) == (18,)
     assert env.action_space == reference.action_space and env.spec.max_episode_steps == 1000
@@ -35,7 +35,7 @@ def test_the_task_is_halfcheetah_v4_with_the_command_appended_and_a_reward_that_
         np.testing.assert_array_equal(obs[:COMMAND_INDEX], ref_obs)
         assert obs[COMMAND_INDEX] == info["command"] == 1.3 and not (terminated or truncated)
         assert info["x_velocity"] == ref_info["x_velocity"]
-        expected = -abs(ref_info["x_velocity"] - 1.3) - 0.1 * float(np.sum(np.square(action)))
+        expected = 1.3 - abs(ref_info["x_velocity"] - 1.3) - 0.1 * float(np.sum(np.square(action)))
         assert reward == pytest.approx(expected, rel=1e-12, abs=1e-12)
         assert ref_reward == pytest.approx(ref_info["x_velocity"] - 0.1 * float(np.sum(np.square(action))))
 
