@@ -61,6 +61,15 @@ BC_TRAIN_FOLDER = "bc_train"
 CLONING_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--null-bc-coef" in flags}
 GOAL_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "{goal}" in flags}
 SCHEDULE_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--guidance-schedule" in flags}
+# The command task's set (results/beyond/command/run_all.sh): its folder, its variants in the report's order with
+# the null branch each is guided by, and its seeds. Its sweeps are read apart from the tasks' folders: its tests
+# are a family of their own and never enter the other questions' Holm families.
+COMMAND_FOLDER = "command"
+COMMAND_VARIANTS = {"pgg_g1.1_null17": "command null", "pgg_g1.1": "state null", "ppo": "untrained null"}
+COMMAND_NULL = "pgg_g1.1_null17"
+COMMAND_SEEDS = 5
+COMMAND_ENV = "paper_study.cheetah_velocity:HalfCheetahVelocity-v0"
+SETS_APART = (BC_FOLDER, COMMAND_FOLDER)  # folders of results/beyond that are not a task's
 COLLAPSE_FRACTION = 0.5
 REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
                   "p", "p_holm", "detectable_gap", "n_seeds", "baseline_n_seeds"]  # fmt: skip
@@ -199,7 +208,7 @@ def read_heldout(folder: Path, table_heldout: Path) -> dict:
     """{(env, variant, step): heldout row} from each task's heldout_gamma.csv and the table's."""
     out = {}
     tasks = [
-        *(path for path in sorted(folder.glob("*/heldout_gamma.csv")) if path.parent.name != BC_FOLDER),
+        *(path for path in sorted(folder.glob("*/heldout_gamma.csv")) if path.parent.name not in SETS_APART),
         *sorted(folder.glob(f"{BC_TRAIN_FOLDER}/*/heldout_gamma.csv")),
     ]
     for path in [*([table_heldout] if table_heldout.exists() else []), *tasks]:
@@ -834,9 +843,325 @@ def distance_figure(distance: dict, variants_of: dict, path: Path) -> None:
     save(fig, axes, path)
 
 
+def read_tracking(path: Path) -> tuple[dict, dict, int]:
+    """({(variant, seed, γ, command): (mean |achieved − commanded| velocity, mean achieved velocity, mean return,
+    episodes)} over the episodes of tracking.csv at its last step, {command: inside the training range}, that step)."""
+    with open(path, newline="") as f:
+        rows = list(csv.DictReader(f))
+    if not rows:
+        return {}, {}, 0
+    last = max(int(r["step"]) for r in rows)
+    cells = defaultdict(list)
+    for r in rows:
+        if int(r["step"]) == last:
+            cells[(r["variant"], int(r["seed"]), float(r["eval_guidance"]), float(r["command"]))].append(
+                (abs(float(r["velocity_error"])), float(r["mean_velocity"]), float(r["return"]))
+            )
+    inside = {float(r["command"]): r["in_training_range"] == "yes" for r in rows}
+    out = {key: (*np.mean(values, axis=0).tolist(), len(values)) for key, values in cells.items()}
+    return out, inside, last
+
+
+def tracking_gaps(cells: dict) -> list[str]:
+    """What the set lacks to be whole: COMMAND_SEEDS seeds of every variant, each at every (γ, command) that any
+    seed has, with as many episodes as the fullest cell; [] where it is whole."""
+    grid = {(g, c) for (v, s, g, c) in cells}
+    episodes = max((n for *_, n in cells.values()), default=0)
+    gaps = []
+    for variant in COMMAND_VARIANTS:
+        seeds = sorted({s for (v, s, g, c) in cells if v == variant})
+        if len(seeds) < COMMAND_SEEDS:
+            gaps.append(f"{paper_name(variant)}: {len(seeds)} of {COMMAND_SEEDS} seeds")
+        short = sorted(f"seed {s}" for s in seeds for g, c in grid
+                       if cells.get((variant, s, g, c), (0, 0, 0, 0))[3] < episodes)  # fmt: skip
+        if short:
+            gaps.append(
+                f"{paper_name(variant)}: cells missing or short of {episodes} episodes ({', '.join(sorted(set(short)))})"
+            )
+    return gaps
+
+
+def per_seed(cells: dict, variant: str, gamma: float, commands: list[float], field: int) -> dict:
+    """{seed: mean over `commands` of one field of the cells (0 error, 1 velocity, 2 return)} for the seeds that
+    hold every one of those cells."""
+    seeds = {s for (v, s, g, c) in cells if v == variant}
+    return {s: float(np.mean([cells[(variant, s, gamma, c)][field] for c in commands])) for s in sorted(seeds)
+            if all((variant, s, gamma, c) in cells for c in commands)}  # fmt: skip
+
+
+def change_of(at: dict, reference: dict) -> dict:
+    return {seed: at[seed] - reference[seed] for seed in at if seed in reference}
+
+
+def command_gain(cells: dict, variant: str, gamma: float, commands: list[float]) -> dict:
+    """{seed: the slope of achieved on commanded velocity over `commands`}: 1 follows every change of command."""
+    out = {}
+    for seed in sorted({s for (v, s, g, c) in cells if v == variant}):
+        if all((variant, seed, gamma, c) in cells for c in commands) and len(commands) > 1:
+            out[seed] = float(np.polyfit(commands, [cells[(variant, seed, gamma, c)][1] for c in commands], 1)[0])
+    return out
+
+
+def seeds_cell(values: dict, digits: int = 2) -> str:
+    if not values:
+        return "–"
+    mean, half, _, _ = mean_ci95(list(values.values()))
+    return f"{mean:.{digits}f} ± {half:.{digits}f}" if len(values) > 1 else f"{mean:.{digits}f}"
+
+
+def command_section(folder: Path, values_out: list[dict]) -> list[str]:
+    """The command task: does γ set how closely an agent follows its command, and with which null?"""
+    base = folder / COMMAND_FOLDER
+    lines = ["## Guidance on a command", "",
+             ("HalfCheetah told each episode how fast to run (`paper_study/cheetah_velocity.py`: a commanded forward "
+              "velocity drawn from the training range, appended to the observation; reward v_cmd − |v − v_cmd| − "
+              "0.1·Σa²), trained with the null on the command (`--null-dims 17`: π(a|s, ∅) is a command-agnostic "
+              "policy, so γ > 1 amplifies what the command adds), with the paper's whole-state null, and as PPO, whose "
+              "null is never trained (results/beyond/command, `run_all.sh`). Each agent at its last mark is given "
+              "commands inside and outside the training range at each eval γ "
+              "(`paper_study/command_tracking.py`: per episode the mean forward velocity over its 1000 steps; the "
+              "tracking error is |achieved − commanded|).")]  # fmt: skip
+    tracking_csv = base / "tracking.csv"
+    if not tracking_csv.exists():
+        return [*lines, "", (f"**Not run yet:** {tracking_csv} does not exist (results/beyond/command/run_all.sh "
+                             "trains, sweeps and tracks the set): no numbers here."), ""]  # fmt: skip
+    cells, inside, last = read_tracking(tracking_csv)
+    if not cells:
+        return [*lines, "", f"**Not run yet:** {tracking_csv} holds no episode: no numbers here.", ""]
+    env = COMMAND_ENV
+    gammas = sorted({g for (v, s, g, c) in cells})
+    commands = sorted({c for (v, s, g, c) in cells})
+    in_range = [c for c in commands if inside[c]]
+    low, high = (min(in_range), max(in_range)) if in_range else (math.nan, math.nan)
+    above, below = (
+        [c for c in commands if not inside[c] and c > high],
+        [c for c in commands if not inside[c] and c < low],
+    )
+    variants = [v for v in COMMAND_VARIANTS if any(k[0] == v for k in cells)]
+    gaps = tracking_gaps(cells)
+    record(values_out, env, "", "command", "whole", float(not gaps))
+    if gaps:
+        lines += ["", (f"**Partial set:** {'; '.join(gaps)}. The tables below hold what there is, at {step_label(last)}; "
+                       "they are not the set's result, and a verdict waits for the whole set."), ""]  # fmt: skip
+    if 1.0 not in gammas or not in_range:
+        return [*lines, "", "No γ = 1 cell or no command inside the training range: nothing to compare.", ""]
+    seeds = len({s for (v, s, g, c) in cells})
+    lines += ["", (f"At {step_label(last)}: {len(variants)} variants, up to {seeds} seeds, eval γ "
+                   f"{', '.join(f'{g:g}' for g in gammas)}; commands inside the training range "
+                   f"{', '.join(f'{c:g}' for c in in_range)}, above it {', '.join(f'{c:g}' for c in above) or 'none'}, "
+                   f"below it {', '.join(f'{c:g}' for c in below) or 'none'} (m/s); each seed's value is the mean over "
+                   "its episodes and the commands named, then mean ± 95% CI over seeds.")]  # fmt: skip
+
+    # Question 1: tracking error and return against γ, each γ against γ = 1 on the same seeds and episodes.
+    tests = []
+    for variant in variants:
+        reference_error = per_seed(cells, variant, 1.0, in_range, 0)
+        reference_return = per_seed(cells, variant, 1.0, in_range, 2)
+        for gamma in gammas:
+            error, ret = per_seed(cells, variant, gamma, in_range, 0), per_seed(cells, variant, gamma, in_range, 2)
+            tests.append({"variant": variant, "gamma": gamma, "error": error, "return": ret,
+                          "error_test": None if gamma == 1.0 else paired_test(error, reference_error),
+                          "return_test": None if gamma == 1.0 else paired_test(ret, reference_return)})  # fmt: skip
+    for kind in ("error_test", "return_test"):
+        tested = [t[kind] for t in tests if t[kind] is not None]
+        for test, p_holm in zip(tested, holm([t["p"] for t in tested])):
+            test["p_holm"] = p_holm
+    family = sum(t["error_test"] is not None for t in tests)
+    lines += ["", ("**Does γ > 1 make an agent follow its command more closely, and at what cost in return?** The "
+                   "tracking error and the return over the commands inside the training range at each eval γ, and "
+                   "each γ against γ = 1: the same seeds and episodes, paired by seed (t test; Holm over the "
+                   f"{family} error tests and apart over the {family} return tests; the difference one test detects "
+                   "with 80% power at α = 0.05, before Holm). A negative error difference follows the command more "
+                   "closely."), "",
+              ("| variant (null) | γ | tracking error (m/s) | vs γ = 1 | p (Holm) | detectable | return | vs γ = 1 | "
+               "p (Holm) |"), "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+    for t in tests:
+        name = f"{paper_name(t['variant'])} ({COMMAND_VARIANTS[t['variant']]})"
+        error_cells, return_cells = ["–", "–", "–"], ["–", "–"]
+        if t["error"]:
+            record(
+                values_out,
+                env,
+                t["variant"],
+                "",
+                f"tracking error at γ {t['gamma']:g}",
+                np.mean(list(t["error"].values())),
+            )
+            record(
+                values_out, env, t["variant"], "", f"return at γ {t['gamma']:g}", np.mean(list(t["return"].values()))
+            )
+        if (test := t["error_test"]) is not None:
+            error_cells = [f"{test['difference']:+.3f}", f"{fmt_p(test['p'])} ({fmt_p(test['p_holm'])})",
+                           f"{test['detectable']:.3f}"]  # fmt: skip
+            for quantity, value in (("tracking error change", test["difference"]), ("tracking error p", test["p"]),
+                                    ("tracking error p Holm", test["p_holm"]),
+                                    ("tracking error detectable", test["detectable"])):  # fmt: skip
+                record(values_out, env, t["variant"], "γ 1", f"{quantity} at γ {t['gamma']:g}", value)
+        if (test := t["return_test"]) is not None:
+            return_cells = [f"{test['difference']:+.1f}", f"{fmt_p(test['p'])} ({fmt_p(test['p_holm'])})"]
+            for quantity, value in (("return change", test["difference"]), ("return p", test["p"]),
+                                    ("return p Holm", test["p_holm"])):  # fmt: skip
+                record(values_out, env, t["variant"], "γ 1", f"{quantity} at γ {t['gamma']:g}", value)
+        lines.append(f"| {name} | {t['gamma']:g} | {seeds_cell(t['error'], 3)} | " + " | ".join(error_cells)
+                     + f" | {seeds_cell(t['return'], 1)} | " + " | ".join(return_cells) + " |")  # fmt: skip
+
+    # Question 2: the command null's change in error from γ = 1 against the other nulls' (distinct runs: Welch).
+    knob = []
+    reference = {v: per_seed(cells, v, 1.0, in_range, 0) for v in variants}
+    for gamma in (g for g in gammas if g != 1.0):
+        ours = change_of(per_seed(cells, COMMAND_NULL, gamma, in_range, 0), reference.get(COMMAND_NULL, {}))
+        for baseline in (v for v in variants if v != COMMAND_NULL):
+            theirs = change_of(per_seed(cells, baseline, gamma, in_range, 0), reference[baseline])
+            if len(ours) >= 2 and len(theirs) >= 2:
+                knob.append(
+                    {"gamma": gamma, "baseline": baseline, **welch_of(list(ours.values()), list(theirs.values()))}
+                )
+    for row, p_holm in zip(knob, holm([r["p"] for r in knob])):
+        row["p_holm"] = p_holm
+    lines += ["", ("**Does the command null give a knob that the state null and PPO's untrained null lack?** Each "
+                   "seed's change in tracking error (inside the training range) from γ = 1 to each γ, the command "
+                   "null's against each other null's: Welch's t test (distinct runs), Holm over these "
+                   f"{len(knob)} tests, the difference one test detects with 80% power at α = 0.05, before Holm; a "
+                   "negative difference is a larger fall in error under the command null. Beside it, the gain: the "
+                   "slope of achieved on commanded velocity over those commands (1 follows every change of command, "
+                   "0 ignores it), mean ± 95% CI over seeds."), "",
+              "| γ | baseline | command null's change | baseline's change | difference | p (Holm) | detectable |",
+              "|---|---|---|---|---|---|---|"]  # fmt: skip
+    for r in knob:
+        for quantity, value in (("knob change", r["mean"]), ("baseline's knob change", r["baseline_mean"]),
+                                ("knob difference", r["mean"] - r["baseline_mean"]), ("knob p", r["p"]),
+                                ("knob p Holm", r["p_holm"]), ("knob detectable", r["detectable"])):  # fmt: skip
+            record(values_out, env, COMMAND_NULL, r["baseline"], f"{quantity} at γ {r['gamma']:g}", value)
+        lines.append(f"| {r['gamma']:g} | {paper_name(r['baseline'])} ({COMMAND_VARIANTS[r['baseline']]}) | "
+                     f"{r['mean']:+.3f} | {r['baseline_mean']:+.3f} | {r['mean'] - r['baseline_mean']:+.3f} | "
+                     f"{fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) | {r['detectable']:.3f} |")  # fmt: skip
+    lines += ["", "| variant (null) | " + " | ".join(f"gain at γ = {g:g}" for g in gammas) + " |",
+              "|---|" + "---|" * len(gammas)]  # fmt: skip
+    for variant in variants:
+        gains = [command_gain(cells, variant, g, in_range) for g in gammas]
+        for gamma, gain in zip(gammas, gains):
+            if gain:
+                record(values_out, env, variant, "", f"gain at γ {gamma:g}", np.mean(list(gain.values())))
+        lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | "
+                     + " | ".join(seeds_cell(g) for g in gains) + " |")  # fmt: skip
+
+    # Question 3: outside the training range, each γ against γ = 1, paired by seed.
+    outside = [(side, chosen) for side, chosen in (("above", above), ("below", below)) if chosen]
+    far = []
+    for variant in variants:
+        for side, chosen in outside:
+            reference_error = per_seed(cells, variant, 1.0, chosen, 0)
+            for gamma in gammas:
+                error = per_seed(cells, variant, gamma, chosen, 0)
+                far.append({"variant": variant, "side": side, "gamma": gamma, "error": error,
+                            "test": None if gamma == 1.0 else paired_test(error, reference_error)})  # fmt: skip
+    tested = [r["test"] for r in far if r["test"] is not None]
+    for test, p_holm in zip(tested, holm([t["p"] for t in tested])):
+        test["p_holm"] = p_holm
+    if outside:
+        lines += ["", ("**Does guidance extend the range of commands an agent can follow outside the training range?** "
+                       "The tracking error over the commands above and below the training range at each eval γ, and "
+                       "its change from γ = 1, paired by seed (t test, Holm over these "
+                       f"{len(tested)} tests): error (change, p Holm)."), "",
+                  "| variant (null) | commands | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |",
+                  "|---|---|" + "---|" * len(gammas)]  # fmt: skip
+        for variant in variants:
+            for side, chosen in outside:
+                row = [r for r in far if r["variant"] == variant and r["side"] == side]
+                shown = []
+                for r in row:
+                    if not r["error"]:
+                        shown.append("–")
+                        continue
+                    mean = float(np.mean(list(r["error"].values())))
+                    record(values_out, env, variant, "", f"tracking error {side} the range at γ {r['gamma']:g}", mean)
+                    if r["test"] is None:
+                        shown.append(f"{mean:.3f}")
+                        continue
+                    for quantity, value in (("change", r["test"]["difference"]), ("p", r["test"]["p"]),
+                                            ("p Holm", r["test"]["p_holm"])):  # fmt: skip
+                        record(values_out, env, variant, "γ 1", f"tracking error {side} the range {quantity} at "
+                               f"γ {r['gamma']:g}", value)  # fmt: skip
+                    shown.append(f"{mean:.3f} ({r['test']['difference']:+.3f}, {fmt_p(r['test']['p_holm'])})")
+                lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | {side} "
+                             f"({', '.join(f'{c:g}' for c in chosen)}) | " + " | ".join(shown) + " |")  # fmt: skip
+    lines += ["", ("Commanded against achieved velocity, one line per eval γ, a panel per variant (mean over seeds, "
+                   "95% CI band; the dashed diagonal follows the command exactly, the grey band is the training "
+                   "range):"), "",
+              f"![Commanded against achieved velocity, one line per eval γ]({COMMAND_FOLDER}/command_tracking.png)"]  # fmt: skip
+    lines += command_sweep_lines(base, env)
+    return [*lines, ""]
+
+
+def command_sweep_lines(base: Path, env: str) -> list[str]:
+    """The set's sweep on the training distribution of commands (episodes.csv) and its held-out γ, where they exist."""
+    if not (base / "episodes.csv").exists():
+        return ["", f"The set's return sweep ({base / 'episodes.csv'}) is not there yet."]
+    means = seed_means(read_rows(base / "episodes.csv"))
+    variants = [v for v in COMMAND_VARIANTS if any(k[0] == env and k[1] == v for k in means)]
+    if not variants:
+        return ["", f"{base / 'episodes.csv'} holds no episode of the command task's variants."]
+    last = last_step(means, env)
+    gammas = sorted({g for (e, v, s, g) in means if e == env and s == last})
+    lines = ["", (f"Return at {step_label(last)} on commands drawn from the training range (the sweep, episode seeds "
+                  "10000+), mean ± 95% CI over seeds, with each variant's seeds counted; and the held-out γ: chosen "
+                  "on that sweep, scored on fresh episodes (seeds 20000+) against γ = 1 there."), "",
+             "| variant (null) | seeds | " + " | ".join(f"γ = {g:g}" for g in gammas) + " | held-out γ: fresh gain |",
+             "|---|---|" + "---|" * (len(gammas) + 1)]  # fmt: skip
+    heldout = {}
+    if (base / "heldout_gamma.csv").exists():
+        with open(base / "heldout_gamma.csv", newline="") as f:
+            heldout = {(r["variant"], int(r["step"])): r for r in csv.DictReader(f) if r["env_id"] == env}
+    for variant in variants:
+        cells = cells_of(means, env, variant)
+        shown = [seeds_cell(cells[(last, g)], 1) if (last, g) in cells else "–" for g in gammas]
+        seeds = max((len(cells[(last, g)]) for g in gammas if (last, g) in cells), default=0)
+        held = heldout.get((variant, last))
+        chosen = "–"
+        if held and held["status"] == "tested":
+            chosen = (f"{float(held['selected_gamma']):g}: {float(held['fresh_gain']):+.1f} ± "
+                      f"{float(held['fresh_gain_ci95']):.1f} (p {fmt_p(float(held['p']))}, Holm "
+                      f"{fmt_p(float(held['p_holm']))})")  # fmt: skip
+        elif held:
+            chosen = f"{float(held['selected_gamma']):g}: {held['status']}"
+        lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | {seeds} | " + " | ".join(shown)
+                     + f" | {chosen} |")  # fmt: skip
+    return lines
+
+
+def command_figure(folder: Path, path: Path) -> bool:
+    """Commanded against achieved velocity, one line per eval γ, a panel per variant; False where no tracking."""
+    tracking_csv = folder / COMMAND_FOLDER / "tracking.csv"
+    if not tracking_csv.exists():
+        return False
+    cells, inside, last = read_tracking(tracking_csv)
+    if not cells:
+        return False
+    variants = [v for v in COMMAND_VARIANTS if any(k[0] == v for k in cells)]
+    gammas, commands = sorted({g for (v, s, g, c) in cells}), sorted({c for (v, s, g, c) in cells})
+    in_range = [c for c in commands if inside[c]]
+    colours = plt.cm.viridis(np.linspace(0, 0.9, len(gammas)))
+    fig, axes = panels(len(variants), 3.6)
+    for ax, variant in zip(axes, variants):
+        if in_range:
+            ax.axvspan(min(in_range), max(in_range), color="0.9", zorder=0)
+        ax.plot(commands, commands, color="0.4", linestyle="--", lw=1)
+        for gamma, colour in zip(gammas, colours):
+            shown = [c for c in commands if per_seed(cells, variant, gamma, [c], 1)]
+            stats = [mean_ci95(list(per_seed(cells, variant, gamma, [c], 1).values())) for c in shown]
+            mean, half = np.array([s[0] for s in stats]), np.array([s[1] for s in stats])
+            ax.plot(shown, mean, marker="o", ms=3, color=colour, label=f"γ = {gamma:g}")
+            ax.fill_between(shown, mean - half, mean + half, color=colour, alpha=0.12)
+        ax.set(title=f"{paper_name(variant)}\n({COMMAND_VARIANTS[variant]}), {step_label(last)}",
+               xlabel="commanded velocity (m/s)", ylabel="achieved mean velocity (m/s)")  # fmt: skip
+        ax.title.set_fontsize(9)
+    save(fig, axes, path)
+    return True
+
+
 def report(args: Args) -> list[Path]:
     folder = Path(args.folder)
-    task_files = sorted([*(path for path in folder.glob("*/episodes.csv") if path.parent.name != BC_FOLDER),
+    task_files = sorted([*(path for path in folder.glob("*/episodes.csv") if path.parent.name not in SETS_APART),
                          *folder.glob(f"{BC_TRAIN_FOLDER}/*/episodes.csv")])  # fmt: skip
     if not task_files:
         raise InputError(f"no <task>/episodes.csv under {folder}")
@@ -883,7 +1208,10 @@ def report(args: Args) -> list[Path]:
     bc_means, bc_fresh, bc_sets, bc_heldout = read_bc(folder, args)
     lines += bc_section(bc_means, bc_fresh, bc_sets, bc_heldout, values)
     lines += cloning_section(fall_tests(means, variants_of, variants=CLONING_VARIANTS), values)
+    lines += command_section(folder, values)
     written = [folder / "report.md", folder / "report.csv", folder / "report_values.csv", folder / "gamma_response.png"]
+    if command_figure(folder, folder / COMMAND_FOLDER / "command_tracking.png"):
+        written.append(folder / COMMAND_FOLDER / "command_tracking.png")
     if trajectories:
         written.append(folder / "guidance_trajectory.png")
         trajectory_figure(trajectories, written[-1])
