@@ -88,7 +88,9 @@ def test_a_missing_set_is_named_and_gives_no_numbers(tmp_path):
 def test_the_figure_draws_a_line_per_gamma_in_a_panel_per_variant(tmp_path, monkeypatch):
     lines = []
     real_plot = beyond_report.plt.Axes.plot
-    monkeypatch.setattr(beyond_report.plt.Axes, "plot", lambda ax, *a, **k: lines.append(k.get("label")) or real_plot(ax, *a, **k))
+    monkeypatch.setattr(
+        beyond_report.plt.Axes, "plot", lambda ax, *a, **k: lines.append(k.get("label")) or real_plot(ax, *a, **k)
+    )
     section(tmp_path, tracking_rows())
     path = tmp_path / "fig.png"
     assert beyond_report.command_figure(tmp_path / "beyond", path) and path.stat().st_size > 0
