@@ -8,6 +8,7 @@
 # agent tracked at GAMMAS x COMMANDS, inside and outside the training range (paper_study/command_tracking.py,
 # 50 episodes per cell, seeds 30000+), and the report. Rerunning it skips finished runs, cells and
 # checkpoints and resumes the others. It commits nothing: run it from a clean worktree of one commit.
+# SEEDS=1 trains seed 1 alone (a go/no-go on whether 1M steps learn to track); the later full run resumes it.
 set -uo pipefail
 cd "$(dirname "$0")/../../.."
 env=paper_study.cheetah_velocity:HalfCheetahVelocity-v0
@@ -15,7 +16,7 @@ out=results/beyond/command
 workers=${WORKERS:-2}
 GAMMAS=(0.5 1 1.25 1.5 2 3)
 COMMANDS=(-0.5 0 0.5 1 1.5 2 2.5 3)
-python reproduce.py --preset continuous --envs "$env" --variants ppo pgg_g1.1_null17 pgg_g1.1 --root runs/command \
+python reproduce.py --preset continuous --envs "$env" --variants ppo pgg_g1.1_null17 pgg_g1.1 --seeds "${SEEDS:-5}" --root runs/command \
     --results "$out" --gammas "${GAMMAS[@]}" --workers "$workers" --compile &&
 cp runs/command/sweep/evaluated_by.csv "$out/evaluated_by.csv"
 echo "set trained and swept: exit $? at $(date -u +%FT%TZ)"
