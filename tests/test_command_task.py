@@ -167,3 +167,25 @@ def test_the_cli_writes_every_episode_sorted(command_run, tmp_path):
     assert reader.fieldnames == command_tracking.COLUMNS and len(rows) == 2 * 2
     assert [(r["command"], r["episode"]) for r in rows] == [("0.0", "0"), ("0.0", "1"), ("2.5", "0"), ("2.5", "1")]
     assert cheetah_velocity.__file__.endswith("cheetah_velocity.py") and rows[0]["task_sha1"]
+
+
+def test_the_launcher_sweeps_what_the_issue_asks_and_its_grid_passes_the_launchers_checks():
+    """results/beyond/command/run_all.sh: at least 5 γ with one below 1 and one above 1.5, commands inside and outside
+    the training range, 50 episodes, the three variants; reproduce.py accepts its grid before training anything."""
+    import re
+
+    import reproduce
+
+    script = (ROOT / "results" / "beyond" / "command" / "run_all.sh").read_text()
+    gammas = [float(g) for g in re.search(r"^GAMMAS=\(([^)]*)\)", script, re.MULTILINE).group(1).split()]
+    commands = [float(c) for c in re.search(r"^COMMANDS=\(([^)]*)\)", script, re.MULTILINE).group(1).split()]
+    assert len(gammas) >= 5 and min(gammas) < 1 and max(gammas) > 1.5 and 1.0 in gammas
+    low, high = COMMAND_RANGE
+    assert (
+        any(low <= c <= high for c in commands) and any(c > high for c in commands) and any(c < low for c in commands)
+    )
+    assert "--episodes 50" in script and f"env={ENV_ID}" in script
+    variants = ("ppo", "pgg_g1.1_null17", "pgg_g1.1")
+    assert f"--variants {' '.join(variants)}" in script
+    args = reproduce.Args(preset="continuous", envs=(ENV_ID,), variants=variants, gammas=tuple(gammas), workers=2)
+    assert reproduce.argument_error(args) is None
