@@ -340,3 +340,21 @@ def test_every_sweep_episode_starts_the_actor_from_a_fresh_state():
     lengths = [sweep.play_episode(env, guided, ckpt, 1.0, 10_000, episode, True)[1] for episode in range(3)]
     sweep.evaluate_cell(guided, ckpt, 1.0, 2, 10_000, True)
     assert min(lengths) > 1 and agent.first_steps == [1, 1, 1, 1]  # the sequential path, then the cell's start
+
+
+def test_a_definition_written_for_torch_alone_acts_through_torch(monkeypatch):
+    """guided_policy with torch functions only: the numpy paths (rollouts, act, bc_null) compute it on tensors."""
+    module = ppo_pgg_discrete
+    torch.manual_seed(0)
+    agent, obs = module.Agent(4, 3), np.random.default_rng(0).normal(size=(5, 4)).astype(np.float32)
+    with torch.no_grad():
+        agent.null_obs.normal_()
+    expected = agent.act(obs, 1.7, deterministic=True)
+    monkeypatch.setattr(module, "guided_policy", lambda c, n, g: module.Categorical(torch.lerp(n.logits, c.logits, g)))
+    pi = agent.acting_policy(obs, 1.7)
+    assert isinstance(pi, policy.TorchDefined) and isinstance(pi.logits, np.ndarray)
+    np.testing.assert_array_equal(agent.act(obs, np.full(5, 1.7), deterministic=True), expected)
+    assert agent.act(obs, 1.7).shape == (5,)  # its own noise, shaped by the logits
+    actions, log_probs, _ = module.RolloutPolicy(agent, 1.7).act(obs, module.gumbel_noise(5, 3))
+    expected_log_probs = agent.policy(torch.from_numpy(obs), 1.7).log_prob(torch.from_numpy(actions))
+    np.testing.assert_allclose(log_probs, expected_log_probs.detach().numpy(), rtol=1e-5, atol=1e-6)
