@@ -300,6 +300,33 @@ def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
     assert "mean ± standard deviation" in (tmp_path / "out" / "compare_paper.md").read_text()
 
 
+def test_compare_paper_compares_the_papers_configurations_only_and_names_the_rest(tmp_path):
+    """A reward-scaled fork's CartPole PPO (returns a tenth of the task's) was compared with the paper
+    (−86.2%) and nothing named the fork: a fork, or a run with another training argument, is left out of
+    the comparison and named in the report and on stderr; the paper's own configuration is compared."""
+    cell = ("CartPole-v1", "ppo", 500000, 1.0)
+    own = episode_rows({cell: [489.0, 490.0, 491.0]})  # config: the variant alone
+    fork = episode_rows({cell: [48.9, 49.0, 49.1]}, config="ppo script=ppo_pgg_scaled.py", run_suffix="_fork")
+    shorter = episode_rows({cell: [300.0, 301.0, 302.0]}, config="ppo learning_rate=0.002", run_suffix="_lr")
+    write_episodes(tmp_path / "episodes.csv", own + fork + shorter)
+    proc = run_cli(tmp_path / "episodes.csv", "--compare-paper", "--output", tmp_path / "out")
+    assert proc.returncode == 0, proc.stderr
+    named = "CartPole-v1 `ppo learning_rate=0.002`; CartPole-v1 `ppo script=ppo_pgg_scaled.py`"
+    assert f"note: left out of the comparison with the paper, not its configuration: {named}" in proc.stderr
+    rows = read_csv(tmp_path / "out" / "compare_paper.csv")
+    assert {r["config"] for r in rows} == {"ppo"} and {float(r["our_mean"]) for r in rows} == {490.0}
+    assert (
+        f"Left out, not the paper's configuration (a fork, or training arguments other than the paper's): {named}."
+        in (tmp_path / "out" / "compare_paper.md").read_text()
+    )
+    write_episodes(tmp_path / "fork.csv", fork)  # the fork alone: nothing is compared, and it is named
+    proc = run_cli(tmp_path / "fork.csv", "--compare-paper", "--output", tmp_path / "fork_out")
+    assert proc.returncode == 0 and "CartPole-v1 `ppo script=ppo_pgg_scaled.py`" in proc.stderr
+    assert not (tmp_path / "fork_out" / "compare_paper.csv").exists()
+    assert paper.is_paper_configuration({"variant": "pgg_g1.1", "config": "pgg_g1.1 mujoco=2.3.7"})
+    assert not paper.is_paper_configuration({"variant": "ppo", "config": "ppo null=bc"})
+
+
 # --- configurations -------------------------------------------------------------------------------
 
 
@@ -909,17 +936,40 @@ def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
         assert err.count("\n") == 1 and err.startswith("error: ") and message in err, err
 
 
-def test_a_rerun_without_runs_keeps_the_learning_curves_a_run_with_them_drew(tmp_path):
-    """The curves come from TensorBoard events a rerun may not have (they are not committed): a rerun
-    without --runs neither redraws nor removes them."""
-    write_episodes(tmp_path / "a.csv", episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272]}))
+def test_a_replot_into_the_same_folder_drops_the_last_plots_learning_curves(tmp_path):
+    """`plot_results.py A --runs R --output X`, then `plot_results.py B --output X`: the curves of A's runs
+    (here of a task B does not hold) are not B's, so the rerun removes them and its outputs.txt does not
+    list them; a file no run listed (committed curves, before any manifest) stays."""
+    write_episodes(tmp_path / "a.csv", episode_rows({("CartPole-v1", "pgg_g1.1", 2048, 1.0): [20, 21, 22]}))
+    write_episodes(tmp_path / "b.csv", episode_rows({("Acrobot-v1", "ppo", 100000, 1.0): [-90, -89, -88]}))
+    write_run(tmp_path / "runs", "CartPole-v1__pgg_g1.1__s1", 1, 4096, checkpoints=(2048, 4096))
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "learning_curves.png").write_bytes(b"drawn from --runs")
-    (out / "outputs.txt").write_text("# header\nlearning_curves.png\n")
-    plots.generate(plots.Args(sweeps=(str(tmp_path / "a.csv"),), output=str(out)))
-    assert (out / "learning_curves.png").read_bytes() == b"drawn from --runs"
-    assert "learning_curves.png" in (out / "outputs.txt").read_text()
+    first = plots.generate(
+        plots.Args(sweeps=(str(tmp_path / "a.csv"),), runs=(str(tmp_path / "runs"),), output=str(out))
+    )
+    assert {out / "learning_curves.png", out / "learning_curves.pdf"} <= set(first)
+    second = plots.generate(plots.Args(sweeps=(str(tmp_path / "b.csv"),), output=str(out)))
+    assert not (out / "learning_curves.png").exists() and not (out / "learning_curves.pdf").exists()
+    listed = set((out / "outputs.txt").read_text().splitlines()[1:])
+    assert listed == {p.name for p in second} - {"outputs.txt"} and not any("learning_curves" in n for n in listed)
+    (out / "outputs.txt").unlink()  # as in a fresh clone of results/, whose curves no manifest lists
+    (out / "learning_curves.png").write_bytes(b"committed, drawn from runs that are not committed")
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "b.csv"),), output=str(out)))
+    assert (out / "learning_curves.png").read_bytes() == b"committed, drawn from runs that are not committed"
+
+
+def test_checkpoint_marks_under_1k_or_between_thousands_are_labelled_exactly(tmp_path):
+    """Marks of 512 and 2,048 steps were "0k" and "2k" (two marks could share a label); whole thousands
+    and millions keep the paper's 100k and 1M."""
+    from paper_study.agreement import step_label
+
+    assert [step_label(s) for s in (512, 2048, 100_000, 500_000, 1_000_000, 1_500_000)] == [
+        "512", "2,048", "100k", "500k", "1M", "1500k"]  # fmt: skip
+    marks = {("CartPole-v1", "ppo", step, 1.0): [20, 21, 22] for step in (512, 1024)}
+    write_episodes(tmp_path / "a.csv", episode_rows(marks))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "a.csv"),), output=str(tmp_path / "out")))
+    table = (tmp_path / "out" / "table_discrete.md").read_text()
+    assert "| **512 Steps** |" in table and "| **1,024 Steps** |" in table and "0k Steps" not in table
 
 
 # --- partial inputs, damaged events, two writers: refused or named, never drawn as whole -------------
