@@ -36,6 +36,9 @@ Writes into --output (and prints each path):
                                 references (0 = the paper's PPO at its first step, 1 = at its last),
                                 with stratified-bootstrap 95% CIs (scipy.stats.bootstrap);
                                 aggregate_iqm_<kind>.png/pdf draws the last step's as intervals
+  performance_profile_<kind>.png/pdf  rliable's performance profile of the same normalised scores at
+                                the last step: per variant and eval γ the fraction of (task, seed)
+                                scores above each τ, with a stratified-bootstrap 95% CI
   compare_paper.md / .csv       (--compare-paper) the agreement report: per paper cell Welch's t test
                                 on the two summaries, Holm-corrected over the cells of one table,
                                 effect sizes, CI overlap and the gap its test detects 80% of the time;
@@ -94,6 +97,7 @@ from paper_study.agreement import (
 )
 from paper_study.figures import cell_index, ordered_series
 from paper_study.paper import PAPER_ENVS, is_paper_configuration, paper_name, paper_rows, series_name, variant_rank
+from paper_study.stats import performance_profile
 from paper_study.summary import (
     ROOT,
     config_labels,
@@ -460,12 +464,11 @@ def iqm_along(*samples, axis=-1):
     return np.take(x, np.arange(cut, n - cut), axis=axis).mean(axis=axis)
 
 
-def aggregate_iqm(summary) -> list[dict]:
-    """Per (variant, step, eval γ): IQM over (env, seed) of per-seed mean returns, normalised per env by
-    fixed references, the paper's PPO at the first and the last step of its table (0 and 1;
+def normalised_scores(summary) -> dict:
+    """{(variant, step, eval γ): [per env, its per-seed mean returns normalised]}: per env by fixed
+    references, the paper's PPO at the first and the last step of its table (0 and 1;
     agreement.paper_ppo_span), so that adding a γ or a variant moves no score; a task the paper did not
-    run is left out. 95% CI by a stratified percentile bootstrap: seeds are resampled within each env
-    (scipy.stats.bootstrap, one sample per env)."""
+    run is left out. The scores of the aggregate IQM and of the performance profile."""
     span = paper_ppo_span()
     groups = defaultdict(list)
     for r in summary:
@@ -476,8 +479,15 @@ def aggregate_iqm(summary) -> list[dict]:
         groups[(series_id(r["variant"], r["series"]), int(r["step"]), float(r["eval_guidance"]))].append(
             (seed_means - lo) / ((hi - lo) or 1.0)
         )
+    return groups
+
+
+def aggregate_iqm(summary) -> list[dict]:
+    """Per (variant, step, eval γ): IQM over (env, seed) of the normalised scores (normalised_scores).
+    95% CI by a stratified percentile bootstrap: seeds are resampled within each env
+    (scipy.stats.bootstrap, one sample per env)."""
     out = []
-    for (variant, step, gamma), per_env in sorted(groups.items()):
+    for (variant, step, gamma), per_env in sorted(normalised_scores(summary).items()):
         point = iqm(np.concatenate(per_env))
         low = high = math.nan
         if all(len(s) >= 2 for s in per_env):
@@ -487,6 +497,19 @@ def aggregate_iqm(summary) -> list[dict]:
         out.append({"variant": variant, "step": step, "eval_guidance": gamma, "n_envs": len(per_env),
                     "iqm": round(point, 4), "ci_low": round(float(low), 4), "ci_high": round(float(high), 4)})  # fmt: skip
     return out
+
+
+def performance_profiles(summary, points: int = 201) -> tuple[dict, int, int]:
+    """({(variant, eval γ): (τ, profile, low, high)}, step, envs): rliable's performance profile
+    (paper_study.stats.performance_profile) of each variant and eval γ at the last step, from the
+    aggregate IQM's normalised scores, on one grid of τ over the scores' range."""
+    scores = normalised_scores(summary)
+    step = max(s for _, s, _ in scores)
+    at_step = {(variant, gamma): per_env for (variant, s, gamma), per_env in scores.items() if s == step}
+    every = np.concatenate([np.concatenate(per_env) for per_env in at_step.values()])
+    taus = np.linspace(min(every.min(), 0.0) - 0.05, max(every.max(), 1.0) + 0.05, points)
+    envs = max(len(per_env) for per_env in at_step.values())
+    return {key: (taus, *performance_profile(per_env, taus)) for key, per_env in at_step.items()}, step, envs
 
 
 def simple_markdown(rows: list[dict]) -> str:
@@ -591,8 +614,11 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
         write_csv(output / "aggregate_iqm.csv", aggregate, written)
         write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
         for kind in sorted({r["kind"] for r in summary if r["env_id"] in paper_ppo_span()}):
-            of_kind = aggregate_iqm([r for r in summary if r["kind"] == kind])
-            save_figure(figures.aggregate_intervals(of_kind, kind), output / f"aggregate_iqm_{kind}", written)
+            of_kind = [r for r in summary if r["kind"] == kind]
+            save_figure(figures.aggregate_intervals(aggregate_iqm(of_kind), kind), output / f"aggregate_iqm_{kind}",
+                        written)  # fmt: skip
+            profile = figures.performance_profiles(*performance_profiles(of_kind), kind=kind)
+            save_figure(profile, output / f"performance_profile_{kind}", written)
     if args.runs:
         curves, left_out = training_curves(args.runs)
         for _, run_dir, why in left_out:

@@ -504,6 +504,32 @@ def aggregate_intervals(aggregate: list[dict], kind: str):
     return fig
 
 
+def performance_profiles(profiles: dict, step: int, envs: int, kind: str):
+    """rliable's performance profile beside the aggregate IQM, from the same normalised scores: one
+    panel per variant, one line per eval γ (its colour in every figure) of the fraction of (task, seed)
+    scores above each τ, its stratified-bootstrap 95% CI as a band; dotted lines at the two fixed
+    references. `profiles`: {(variant [series], eval γ): (taus, profile, low, high)}
+    (plot_results.performance_profiles)."""
+    variants = sorted({v for v, _ in profiles}, key=lambda v: (variant_rank(v.split(" [")[0]), v))
+    fig, axes = panels(len(variants))
+    entries = []
+    for ax, variant in zip(axes, variants, strict=True):
+        for gamma in sorted(g for v, g in profiles if v == variant):
+            taus, profile, low, high = profiles[(variant, gamma)]
+            colour = gamma_colour(gamma, kind)
+            (line,) = ax.plot(taus, profile, color=colour, linewidth=1.2, drawstyle="steps-post")
+            ax.fill_between(taus, low, high, color=colour, alpha=0.15, linewidth=0, step="post")
+            entries.append((gamma, f"γ = {gamma:g}", line))
+        for x in (0.0, 1.0):
+            ax.axvline(x, color="0.5", linestyle=":", linewidth=1)
+        ax.set_ylim(-0.02, 1.02)
+        style_axis(ax, series_label(variant), "normalised score τ", "fraction of runs with score > τ", steps_on_x=False)
+    legend_right(fig, entries, "eval γ")
+    fig.suptitle(f"{kind.capitalize()}: performance profile over {envs} tasks × seeds at {step_label(step)} steps "
+                 "(95% CI; 0 = the paper's PPO at its first step, 1 = at its last)", fontsize=TITLE_SIZE)  # fmt: skip
+    return fig
+
+
 def series_label(series: str) -> str:
     """The paper's name of an aggregate row's variant (`variant [series]`)."""
     variant, _, rest = series.partition(" [")

@@ -24,6 +24,7 @@ from paper_study.stats import (
     holm,
     median_relative_gap,
     null_rates,
+    performance_profile,
     sd_from_ci,
     sign_test,
     welch,
@@ -706,6 +707,47 @@ def test_batched_iqm_equals_scipy_trim_mean():
     samples = [rng.normal(size=(7, 5)), rng.normal(size=(7, 3))]
     expected = [stats.trim_mean(np.concatenate([s[i] for s in samples]), 0.25) for i in range(7)]
     assert plots.iqm_along(*samples, axis=-1) == pytest.approx(expected)
+
+
+def test_the_performance_profile_is_drawn_from_the_iqms_normalised_scores(sweep_dir, tmp_path):
+    """Beside the IQM, rliable's performance profile: at the last step, per variant and eval γ, the
+    fraction of the same normalised (env, seed) scores the IQM pools above each τ."""
+    written = generate(sweep_dir, tmp_path)
+    assert {
+        tmp_path / "out" / "performance_profile_discrete.png",
+        tmp_path / "out" / "performance_profile_discrete.pdf",
+    } <= set(written)
+    summary = summary_of(sweep_dir / "episodes.csv")
+    scores = plots.normalised_scores(summary)
+    profiles, step, envs = plots.performance_profiles(summary)
+    assert step == 200000 and envs == 2 and set(profiles) == {("ppo", 1.0), ("pgg_g1.1", 1.0), ("pgg_g1.1", 2.0)}
+    for (variant, gamma), (taus, profile, low, high) in profiles.items():
+        pooled = np.concatenate(scores[(variant, step, gamma)])
+        assert profile == pytest.approx([(pooled > tau).mean() for tau in taus])
+        assert np.all(low <= profile + 1e-12) and np.all(profile <= high + 1e-12)
+        iqm_row = next(
+            r
+            for r in plots.aggregate_iqm(summary)
+            if (r["variant"], r["step"], r["eval_guidance"]) == (variant, step, gamma)
+        )
+        assert iqm_row["iqm"] == round(float(stats.trim_mean(pooled, 0.25)), 4)  # the IQM's scores, the same
+    fig = figures.performance_profiles(profiles, step, envs, "discrete")
+    assert [ax.get_title() for ax in fig.axes if ax.get_visible()] == ["PPO", "PGG, γ_train = 1.1"]
+    matplotlib.pyplot.close(fig)
+
+
+def test_the_performance_profile_agrees_with_rliables():
+    """Checked once against rliable (needs pandas<3): the profile is equal, its stratified-bootstrap
+    interval within one step of the profile (1/30 here: 6 tasks × 5 runs), as two RNGs allow."""
+    rly = pytest.importorskip("rliable.library")
+    rng = np.random.default_rng(0)
+    per_task = [rng.normal(0.5, 0.3, 5) for _ in range(6)]
+    taus = np.linspace(-0.5, 1.5, 41)
+    profile, low, high = performance_profile(per_task, taus)
+    theirs, intervals = rly.create_performance_profile({"x": np.stack(per_task, axis=1)}, taus, reps=2000)
+    assert np.array_equal(profile, theirs["x"])
+    assert np.abs(low - intervals["x"][0]).max() <= 1 / 30 + 1e-9
+    assert np.abs(high - intervals["x"][1]).max() <= 1 / 30 + 1e-9
 
 
 def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
