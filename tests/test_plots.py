@@ -1014,6 +1014,54 @@ def test_checkpoint_marks_under_1k_or_between_thousands_are_labelled_exactly(tmp
     assert "| **512 Steps** |" in table and "| **1,024 Steps** |" in table and "0k Steps" not in table
 
 
+# --- one reader of episodes.csv --------------------------------------------------------------------
+
+
+def test_the_paper_study_reads_episodes_without_plot_results(tmp_path):
+    """The paper study's readers import pgg_utils.episodes (and paper_study.summary), not the top-level
+    plot_results: each runs with plot_results made unimportable."""
+    code = ("import sys; sys.modules['plot_results'] = None; sys.path.insert(0, '.'); "
+            "import paper_study.compare_sweeps, paper_study.heldout_gamma, paper_study.selection, "
+            "paper_study.bc_train_pilot, paper_study.summary; sys.path.insert(0, 'paper_study/data'); "
+            "import read_dropout_figure")  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
+    """The sweep's summary ordered seeds as text ("10" before "2"), the tables as numbers: both now take
+    pooling.seed_means, so one cell's seed_means reads the same in summary.csv and in the tables, and the
+    held-out selection's per-seed means are the same numbers."""
+    import eval_gamma_sweep as sweep
+    from paper_study import selection
+
+    rows = [r | {"seed": seed, "run": f"CartPole-v1__ppo__s{seed}"}
+            for seed in (2, 10) for r in episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [20.0 * seed]})]  # fmt: skip
+    write_episodes(tmp_path / "episodes.csv", rows)
+    (table_cell,) = summary_of(tmp_path / "episodes.csv")
+    (sweep_cell,) = sweep.summarise([{k: str(v) for k, v in r.items()} for r in rows])
+    assert table_cell["seed_means"] == sweep_cell["seed_means"] == "40.0000;200.0000"
+    (group,) = selection.seed_means(plots.read_episodes([tmp_path / "episodes.csv"])).values()
+    assert group == {1.0: {2: 40.0, 10: 200.0}}
+
+
+def test_every_reader_of_episodes_refuses_a_cut_file(tmp_path):
+    """A cell short of episodes (a cut file) is refused in one line by each reader: plot_results, the
+    held-out γ, the comparison of two sweeps and the cloning pilot, which read it as whole before."""
+    from conftest import one_line_error, run_script
+
+    rows = episode_rows(SEED_MEANS)
+    write_episodes(tmp_path / "cut" / "episodes.csv", rows[:-1])
+    (tmp_path / "runs").mkdir()
+    cut = str(tmp_path / "cut" / "episodes.csv")
+    for script, flags in [("plot_results.py", [cut, "--output", str(tmp_path / "o")]),
+                          ("paper_study/heldout_gamma.py", [cut, cut, "--output", str(tmp_path / "h")]),
+                          ("paper_study/compare_sweeps.py", [cut, cut]),
+                          ("paper_study/bc_train_pilot.py", [str(tmp_path / "runs"), cut])]:  # fmt: skip
+        line = one_line_error(run_script(script, *flags))
+        assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (script, line)
+
+
 # --- partial inputs, damaged events, two writers: refused or named, never drawn as whole -------------
 
 
