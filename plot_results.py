@@ -640,14 +640,16 @@ def compare_paper(summary: list[dict], output: Path, written: list[Path]) -> Non
     if left_out:
         print(f"note: left out of the comparison with the paper, not its configuration: {'; '.join(left_out)}",
               file=sys.stderr)  # fmt: skip
+    named = (f"Left out, not the paper's configuration (a fork, or training arguments other than the paper's): "
+             f"{'; '.join(left_out)}.\n")  # fmt: skip
+    if not paper_cells and left_out:
+        write(output / "compare_paper.md", f"# Against the paper\n\nNo cell compared.\n\n{named}", written)
+        return
     comparison = compare_with_paper(paper_cells) if paper_cells else None
     if comparison is None:  # no swept task is the paper's: their tables and figures are the results
         return
     tasks = task_summaries(comparison, paper_cells)
-    report = comparison_markdown(comparison, paper_cells, tasks)
-    if left_out:
-        report += ("\nLeft out, not the paper's configuration (a fork, or training arguments other than the "
-                   f"paper's): {'; '.join(left_out)}.\n")  # fmt: skip
+    report = comparison_markdown(comparison, paper_cells, tasks) + (f"\n{named}" if left_out else "")
     write_csv(output / "compare_paper.csv", comparison, written)
     write_csv(output / "compare_paper_tasks.csv", tasks, written)
     write(output / "compare_paper.md", report, written)

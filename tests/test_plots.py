@@ -324,6 +324,7 @@ def test_compare_paper_compares_the_papers_configurations_only_and_names_the_res
     proc = run_cli(tmp_path / "fork.csv", "--compare-paper", "--output", tmp_path / "fork_out")
     assert proc.returncode == 0 and "CartPole-v1 `ppo script=ppo_pgg_scaled.py`" in proc.stderr
     assert not (tmp_path / "fork_out" / "compare_paper.csv").exists()
+    assert "No cell compared" in (tmp_path / "fork_out" / "compare_paper.md").read_text()
     assert paper.is_paper_configuration({"variant": "pgg_g1.1", "config": "pgg_g1.1 mujoco=2.3.7"})
     assert not paper.is_paper_configuration({"variant": "ppo", "config": "ppo null=bc"})
 
