@@ -629,27 +629,27 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
 
 
 def compare_paper(summary: list[dict], output: Path, written: list[Path]) -> None:
-    """The agreement report, of the paper's configurations only (paper.is_paper_configuration): a fork or
-    any other configuration of a variant the paper tables is left out, and named on stderr and in the
-    report. Nothing is written where no swept task is the paper's or no configuration is."""
-    paper_cells = [r for r in summary if is_paper_configuration(r)]
-    others = sorted(
-        {(r["env_id"], r["config"]) for r in summary if paper_rows(r["variant"]) and not is_paper_configuration(r)}
-    )
-    left_out = [f"{env} `{config}`" for env, config in others]
+    """The agreement report, of the paper's configurations only (paper.is_paper_configuration): on the
+    paper's tasks a fork or any other configuration of a variant the paper tables is left out, and named
+    on stderr and in the report. Nothing is written where no swept task is the paper's."""
+    paper_tasks = {env for envs in PAPER_ENVS.values() for env in envs}
+    others = {(r["env_id"], r["config"]) for r in summary
+              if r["env_id"] in paper_tasks and paper_rows(r["variant"]) and not is_paper_configuration(r)}  # fmt: skip
+    left_out = [f"{env} `{config}`" for env, config in sorted(others)]
+    named = (f"Left out, not the paper's configuration (a fork, or training arguments other than the paper's): "
+             f"{'; '.join(left_out)}.\n")  # fmt: skip
     if left_out:
         print(f"note: left out of the comparison with the paper, not its configuration: {'; '.join(left_out)}",
               file=sys.stderr)  # fmt: skip
-    named = (f"Left out, not the paper's configuration (a fork, or training arguments other than the paper's): "
-             f"{'; '.join(left_out)}.\n")  # fmt: skip
-    if not paper_cells and left_out:
+    cells = [r for r in summary if (r["env_id"], r["config"]) not in others]
+    if left_out and not any(r["env_id"] in paper_tasks for r in cells):
         write(output / "compare_paper.md", f"# Against the paper\n\nNo cell compared.\n\n{named}", written)
         return
-    comparison = compare_with_paper(paper_cells) if paper_cells else None
+    comparison = compare_with_paper(cells)
     if comparison is None:  # no swept task is the paper's: their tables and figures are the results
         return
-    tasks = task_summaries(comparison, paper_cells)
-    report = comparison_markdown(comparison, paper_cells, tasks) + (f"\n{named}" if left_out else "")
+    tasks = task_summaries(comparison, cells)
+    report = comparison_markdown(comparison, cells, tasks) + (f"\n{named}" if left_out else "")
     write_csv(output / "compare_paper.csv", comparison, written)
     write_csv(output / "compare_paper_tasks.csv", tasks, written)
     write(output / "compare_paper.md", report, written)

@@ -1,6 +1,6 @@
 """Pooling over seeds, once: the rule behind every statistic over seeds (within one configuration a seed
-is one run, and each episode of a cell is counted once) and the statistic itself, the mean over seeds
-and its 95% confidence interval."""
+is one run, and each episode of a cell is counted once), the per-seed mean return every such statistic
+starts from (seed_means), and the statistic itself, the mean over seeds and its 95% confidence interval."""
 
 import math
 from collections import defaultdict
