@@ -20,11 +20,9 @@ import numpy as np
 
 from paper_study.agreement import other_mujoco, step_label
 from paper_study.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank, with_series
+from pgg_utils.episodes import RETURN_RANGE  # the possible return of a task: axes never extend past it
 from pgg_utils.pooling import mean_ci95
 
-# The possible return of a task, where it has one: axes never extend past it.
-RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
-                "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
 MARKERS = "osD^vPX*hp<>"
 # The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
 # variants fixed, any other a fixed colour of its name) and one per eval γ. An eval γ takes the colour the
