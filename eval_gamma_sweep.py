@@ -874,14 +874,14 @@ def record_videos(args: Args) -> list[Path]:
         probe = policy.make_env(render_mode="rgb_array")
     except Exception as e:
         raise InputError(f"cannot make environment {ckpt['env_id']!r} ({first_line(e)})") from None
-    error = runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
+    changed = task_error(ckpt, Task(probe.observation_space, probe.action_space, ""))
+    error = None if changed else runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30
-    task = Task(probe.observation_space, probe.action_space, "")
     probe.close()
+    if changed:
+        raise InputError(f"{checkpoints[0]}: {changed}")
     if error:
         raise InputError(error.replace("--capture-video", "--video"))
-    if error := task_error(ckpt, task):
-        raise InputError(f"{checkpoints[0]}: {error}")
     output = Path(args.video)
     output.mkdir(parents=True, exist_ok=True)
     gammas = args.gammas if args.gammas is not None else DEFAULT_GAMMAS[ckpt["action_space"]]

@@ -271,6 +271,9 @@ class Walk(gym.Env):
     observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float32)
     action_space = gym.spaces.Discrete(N_ACTIONS)
 
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
+
     def reset(self, seed=None, options=None):
         super().reset(seed=seed)
         self.t = 0
@@ -403,6 +406,15 @@ def test_a_task_whose_spaces_changed_since_training_is_skipped_in_one_line(tmp_p
     reason = the_one_skip(*swept_beside_a_good_checkpoint(run_dir, tmp_path, capsys), run_dir)
     assert message in reason, reason
     assert {job.checkpoint.parent.parent for job in evaluated} == {FORMAT_2.parent.parent}  # never played
+
+
+def test_video_of_a_checkpoint_whose_task_changed_is_one_line(tmp_path, monkeypatch):
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch, trained={"OBS_DIM": 3}, OBS_DIM=1)
+    checkpoint = runs.checkpoints_of(run_dir)[-1]
+    args = sweep.Args(paths=(str(checkpoint),), gammas=(1.0,), video=str(tmp_path / "videos"))
+    with pytest.raises(files.InputError, match=r"has changed since training: observation shape \(3,\) in training"):
+        sweep.record_videos(args)
+    assert not (tmp_path / "videos").exists()
 
 
 BOX_TASK = """
