@@ -241,14 +241,15 @@ def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
 
 def action_error(ckpt: dict, action_space: gym.Space) -> str | None:
     """One line where the sweep cannot act in the checkpoint's Box action space: one of more than one
-    dimension (the agent's actions are flat vectors; flatten the action in make_env to train on such a
-    task), or one whose size differs from the agent's."""
-    shape = tuple(spaces.recorded(ckpt)["action"].get("shape", ()))
+    dimension, in training or now (the agent's actions are flat vectors; flatten the action in make_env to
+    train on such a task). A size that changed since training is spaces.mismatch's."""
     if not isinstance(action_space, gym.spaces.Box) or ckpt["action_space"] != "continuous":
         return None
-    if len(action_space.shape) > 1 or len(shape) > 1:
-        return (f"its task's actions are a Box of shape {action_space.shape}; the agent acts with flat vectors "
-                f"of {ckpt['action_dim']}: flatten the action in make_env (and train on that) to sweep it")  # fmt: skip
+    trained = tuple(spaces.recorded(ckpt)["action"].get("shape", ()))
+    shape = next((s for s in (action_space.shape, trained) if len(s) > 1), None)
+    if shape is not None:
+        return (f"its task's actions are a Box of shape {shape}; the agent acts with flat vectors of "
+                f"{ckpt['action_dim']}: flatten the action in make_env (and train on that) to sweep it")  # fmt: skip
     return None
 
 

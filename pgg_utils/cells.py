@@ -58,23 +58,27 @@ def imported_files(roots) -> list[Path]:
 
 def module_files(name: str, folder: Path) -> list[Path]:
     """The project files that importing `name` from a file in `folder` runs: each package's __init__ on the
-    way and the module itself; [] for a module of an installed package or of the standard library."""
+    way and the module itself, found beside the importing file or at the top of the repository (this
+    package's folder); [] for a module of an installed package or of the standard library."""
     parts, level = name.lstrip(".").split("."), len(name) - len(name.lstrip("."))
     if level:  # relative: from `folder`, one folder up per dot after the first
-        base = folder.parents[level - 2] if level > 1 else folder
+        bases = [folder.parents[level - 2] if level > 1 else folder]
     else:
-        base = PACKAGE.parent if parts[0] == PACKAGE.name else folder
-    files, here = [], base
-    for part in filter(None, parts):
-        here = here / part
-        if (here / "__init__.py").is_file():
-            files.append(here / "__init__.py")
-        elif here.with_suffix(".py").is_file():
-            files.append(here.with_suffix(".py"))
-            break
-        else:
-            break
-    return files
+        bases = [PACKAGE.parent] if parts[0] == PACKAGE.name else [folder, PACKAGE.parent]
+    for base in bases:
+        files, here = [], base
+        for part in filter(None, parts):
+            here = here / part
+            if (here / "__init__.py").is_file():
+                files.append(here / "__init__.py")
+            elif here.with_suffix(".py").is_file():
+                files.append(here.with_suffix(".py"))
+                break
+            else:
+                break
+        if files:
+            return files
+    return []
 
 
 def code_digest(files) -> str:

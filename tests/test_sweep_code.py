@@ -159,3 +159,19 @@ def test_video_makes_its_env_with_the_scripts_make_env(monkeypatch):
     policy = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
     frames, total = sweep.record_episode(policy, ckpt, 1.0, 10_000, 0, True)
     assert made == ["rgb_array"] and len(frames) == total + 1 and frames[0].ndim == 3
+
+
+def test_the_code_of_a_cell_is_read_from_import_statements(tmp_path):
+    """A fork's helper module beside it (imported inside a function too) and the project modules it imports,
+    transitively, are part of a cell's code; installed packages and the standard library are not."""
+    from pgg_utils import cells
+
+    (tmp_path / "ppo_fork.py").write_text("import json\nimport torch\nfrom pgg_utils import fast\n\n\n"
+                                          "def make_env():\n    import fork_helpers\n")  # fmt: skip
+    (tmp_path / "fork_helpers.py").write_text("from pgg_utils.arguments import acting_error\n")
+    found = cells.imported_files([tmp_path / "ppo_fork.py"])
+    package = ROOT / "pgg_utils"
+    assert {tmp_path / "ppo_fork.py", tmp_path / "fork_helpers.py"} | {
+        package / name for name in ("__init__.py", "fast.py", "arguments.py")
+    } <= set(found)
+    assert all(path.parent in (tmp_path, package) for path in found)  # no torch, no json
