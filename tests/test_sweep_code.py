@@ -20,7 +20,7 @@ import ppo_pgg_discrete
 from pgg_utils import files
 
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
-LOOP_LINE = "            actions = policy.act(obs, guidance, noise[t], deterministic)\n"
+LOOP_LINE = "actions = policy.act(obs, guidance, noise[t], deterministic)"
 RETURN_LINE = '    return {"return": returns, "length": lengths}\n'
 
 
