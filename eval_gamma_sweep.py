@@ -42,10 +42,10 @@ recorded in every row) and every file of code that runs in its episodes: this sw
 of it), the script that evaluates the checkpoint, a custom task's module, and each project module these
 import, read from their import statements (evaluation_code). A rerun reuses a cell only if it is whole
 and every row's checksum holds, so an interrupted sweep (Ctrl-C: exit status 130) loses only the cells
-in flight, a damaged cell is evaluated again, and so is every cell after an edit to any of that code. Then episodes.csv (every episode of the requested cells,
-sorted), summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean
-return, and its 95% confidence interval, see `mean_ci95`), skipped.csv, evaluated_by.csv, and
-written.csv: episodes.csv, summary.csv and skipped.csv with their numbers of rows and sha256, by which
+in flight, a damaged cell is evaluated again, and so is every cell after an edit to any of that code.
+Then episodes.csv (every episode of the requested cells, sorted), summary.csv (per env, variant,
+config, step and γ: mean over seeds of the per-seed mean return, and its 95% confidence interval, see
+`mean_ci95`), skipped.csv, evaluated_by.csv, and written.csv: episodes.csv, summary.csv and skipped.csv with their numbers of rows and sha256, by which
 plot_results.py refuses an episodes.csv that is not whole.
 
 Returns and faults. An episode's return is the task's own: the one that gymnasium's RecordEpisodeStatistics,
