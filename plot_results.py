@@ -487,13 +487,16 @@ def incomplete_run(run_dir: Path, run_args: dict, accumulator) -> str | None:
 def read_provenance(path: str | None) -> dict:
     """{resolved CSV path: row} from a CSV with columns csv (relative to the repository), commits,
     mujoco, machine, and optional code (the training code's revision), code_date (its commit's date, by
-    which figures tell older code) and notes."""
+    which figures tell older code) and notes. The repository is the nearest folder above the provenance file
+    that holds the listed CSV (an installed copy's own folder holds no results), else this file's."""
     if path is None:
         return {}
     rows = read_csv(path)
     if not rows or "csv" not in rows[0]:
         raise InputError(f"{path} lacks a csv column; see results/provenance.csv")
-    return {str((ROOT / r["csv"]).resolve()): r for r in rows}
+    folders = [*Path(path).resolve().parents, ROOT]
+    return {str(next((f / r["csv"] for f in folders if (f / r["csv"]).exists()), ROOT / r["csv"]).resolve()): r
+            for r in rows}  # fmt: skip
 
 
 def provenance_entry(provenance: dict, source: str) -> dict:
