@@ -17,7 +17,7 @@ from conftest import ROOT
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_discrete
-from pgg_utils import files
+from pgg_utils import files, scripts
 
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
 LOOP_LINE = "actions = policy.act(obs, guidance, noise[t], deterministic)"
@@ -175,3 +175,30 @@ def test_the_code_of_a_cell_is_read_from_import_statements(tmp_path):
         package / name for name in ("__init__.py", "fast.py", "arguments.py")
     } <= set(found)
     assert all(path.parent in (tmp_path, package) for path in found)  # no torch, no json
+
+
+RECORDED_MAKE_ENV = """
+
+def make_env(env_id: str, video_dir=None, render_mode=None):
+    def thunk():
+        return gym.wrappers.FlattenObservation(gym.wrappers.RecordEpisodeStatistics(gym.make(env_id, render_mode=render_mode)))
+
+    return thunk
+"""
+
+
+def test_a_recorded_return_is_the_summed_one_to_the_last_bit(tmp_path):
+    """A shipped Hopper agent swept through a make_env with RecordEpisodeStatistics on the task and through one
+    without: the same float64 additions in the same order, so the same digits (committed episodes regenerate)."""
+    fork = tmp_path / "ppo_pgg_continuous.py"
+    fork.write_text((ROOT / "ppo_pgg_continuous.py").read_text() + RECORDED_MAKE_ENV)
+    agent = min((ROOT / "results" / "continuous" / "agents").glob("Hopper-v4__ppo__s1/checkpoints/step_*.pt"))
+    args = sweep.Args(paths=(str(agent),), gammas=(1.0,), episodes=2, output=str(tmp_path / "summed"))
+    summed = files.read_csv(sweep.sweep(args) / "episodes.csv")
+    recorded = files.read_csv(sweep.sweep(replace(args, output=str(tmp_path / "recorded"), script=(str(fork),))) /
+                              "episodes.csv")  # fmt: skip
+    assert [r["return"] for r in recorded] == [r["return"] for r in summed]
+    assert sweep.records_episodes(
+        scripts.load_module(fork).make_env("Hopper-v4")()
+    )  # the fork's path is the recorder's
+    assert all(float(r["return"]) != int(float(r["return"])) for r in summed)  # fractional: float sums, not counts
