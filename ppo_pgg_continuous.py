@@ -25,6 +25,7 @@ from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports
 
 # isort: split
 import math
+import sys
 from collections import defaultdict
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -34,8 +35,9 @@ import numpy as np
 import torch
 import tyro
 from torch import nn
+from torch.distributions import Normal, kl_divergence
 
-from pgg_utils import runs
+from pgg_utils import runs, spaces
 from pgg_utils.arguments import RunArgs, acting_error
 from pgg_utils.fast import (
     evaluation_forward,
@@ -43,6 +45,19 @@ from pgg_utils.fast import (
     numpy_network,
 )
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
+from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm, normalise_obs, update_running_moments
+from pgg_utils.policy import (
+    branch_pass,
+    eval_mode,
+    frozen,
+    guidance_none_error,  # PGG
+    null_pass,  # PGG
+    numpy_policy,
+    observation_error,
+    path_error,
+    probe_observations,
+    refuse,
+)
 
 ACTION_SPACE = "continuous"  # the checkpoints' kind; the sweep picks this script by it
 LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
@@ -94,12 +109,20 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
     """save a checkpoint at the first iteration boundary past each multiple of this many steps (at least one batch, num_envs * num_steps)"""
 
 
-def make_env(env_id: str, video_dir: Path | None = None):
+def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None = None):
+    """The task as the agent sees it, for training, the sweep and --video alike. Every reported return (training's
+    charts/episodic_return, the sweep's) is RecordEpisodeStatistics' sum of the task's own rewards: reward shaping,
+    a reward scale or a frame stack goes after it, at the end of `thunk`. With `video_dir`, RecordVideo records
+    there; `render_mode` is gym.make's."""
+
     def thunk():
-        if video_dir is None:
-            return gym.wrappers.FlattenObservation(gym.make(env_id))
-        env = gym.wrappers.RecordVideo(gym.make(env_id, render_mode="rgb_array"), str(video_dir), disable_logger=True)
-        return gym.wrappers.FlattenObservation(env)
+        render = {"render_mode": "rgb_array"} if video_dir is not None else {"render_mode": render_mode}
+        env = gym.make(env_id, **(render if render["render_mode"] else {}))  # a task may take no render_mode
+        if video_dir is not None:
+            env = gym.wrappers.RecordVideo(env, str(video_dir), disable_logger=True)
+        env = gym.wrappers.FlattenObservation(env)
+        # The task's own returns: a wrapper that changes rewards wraps what this line returns.
+        return gym.wrappers.RecordEpisodeStatistics(env)
 
     return thunk
 
@@ -108,15 +131,14 @@ def make_vector_env(
     env_id: str, num_envs: int, seed: int, discount: float, reward_clip: float, video_dir: Path | None = None
 ) -> gym.vector.VectorEnv:
     """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE
-    below relies on). Episode statistics are recorded on raw rewards, before normalisation.
-    Observations come out raw: the agent normalises them itself (see RunningObsNorm). The wrappers
-    sit on each sub-env, as in CleanRL (so do the reward statistics), cheaper than gymnasium 1.4's
-    vector versions. With `video_dir`, the first sub-env's episodes are recorded there (CleanRL's
+    below relies on). Episode statistics are recorded on raw rewards, in make_env, before normalisation.
+    Observations come out raw: the agent normalises them itself (RunningObsNorm). The wrappers sit on
+    each sub-env, as in CleanRL (so do the reward statistics), cheaper than gymnasium 1.4's vector
+    versions (pgg_utils/normalisation.py). With `video_dir`, the first sub-env's episodes are recorded there (CleanRL's
     schedule: episodes 0, 1, 8, 27, ..., 1000, 2000, ...)."""
 
     def training_env(video_dir: Path | None):
-        env = gym.wrappers.RecordEpisodeStatistics(make_env(env_id, video_dir)())
-        env = gym.wrappers.ClipAction(env)
+        env = gym.wrappers.ClipAction(make_env(env_id, video_dir)())
         return NormalizeClipReward(env, discount, reward_clip)
 
     envs = gym.vector.SyncVectorEnv(
@@ -127,77 +149,6 @@ def make_vector_env(
     return envs
 
 
-class NormalizeClipReward(gym.Wrapper):
-    """gymnasium's NormalizeReward followed by ClipReward, the reward scaling CleanRL puts on each
-    sub-env: rewards are divided by the running standard deviation of the discounted return (which
-    a termination resets and a truncation does not), then clipped. The same float64 operations in
-    the same order on Python floats, the same bits (tests/test_continuous.py) at a ninth of the cost."""
-
-    def __init__(self, env: gym.Env, discount: float, clip: float, epsilon: float = 1e-8):
-        super().__init__(env)
-        self.discount, self.clip, self.epsilon = discount, clip, epsilon
-        self.discounted_return, self.return_mean, self.return_var, self.return_count = 0.0, 0.0, 1.0, 1e-4
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        self.discounted_return = self.discounted_return * self.discount * (1 - terminated) + float(reward)
-        # gymnasium's RunningMeanStd update with a batch of one (mean: the return, variance: 0)
-        delta = self.discounted_return - self.return_mean
-        total = self.return_count + 1
-        self.return_mean += delta / total
-        self.return_var = (self.return_var * self.return_count + delta * delta * self.return_count / total) / total
-        self.return_count = total
-        scaled = reward / math.sqrt(self.return_var + self.epsilon)
-        return obs, min(max(scaled, -self.clip), self.clip), terminated, truncated, info
-
-
-def update_running_moments(mean: np.ndarray, var: np.ndarray, count: np.ndarray, batch: np.ndarray) -> None:
-    """gymnasium's RunningMeanStd update, in place on float64 arrays (`count` 0-d), with the same
-    operations in the same order, at half its cost."""
-    batch_count = batch.shape[0]
-    batch_mean = batch.sum(0) / batch_count
-    batch_var = np.square(batch - batch_mean).sum(0) / batch_count
-    delta = batch_mean - mean
-    total = count + batch_count
-    m2 = var * count + batch_var * batch_count + np.square(delta) * count * batch_count / total
-    mean += delta * batch_count / total
-    var[:] = m2 / total
-    count[...] = total
-
-
-def normalise_obs(raw_obs, mean: np.ndarray, var: np.ndarray, epsilon: float, clip: float) -> np.ndarray:
-    """Normalised, clipped float32 observations from raw ones (array-like, (B, obs_dim))."""
-    normalised = (np.asarray(raw_obs, dtype=np.float64) - mean) / np.sqrt(var + epsilon)
-    return np.minimum(np.maximum(normalised, -clip), clip).astype(np.float32)  # np.clip costs twice as much
-
-
-class RunningObsNorm(nn.Module):
-    """Running mean/variance of observations, as gymnasium's NormalizeObservation computes them, kept
-    as buffers so that they are saved in the state dict. Only training rollouts update them, with the
-    observations CleanRL's per-sub-env NormalizeObservation sees, in its order: every observation that
-    a reset or a step returns, an episode's last one included (`collect_rollout`). Evaluation reads
-    them frozen. With several sub-envs the statistics are pooled over them (CleanRL keeps one set per
-    sub-env, which no single checkpoint could carry)."""
-
-    def __init__(self, obs_dim: int, clip: float, epsilon: float = 1e-8):
-        super().__init__()
-        self.clip, self.epsilon = clip, epsilon
-        self.register_buffer("mean", torch.zeros(obs_dim, dtype=torch.float64))
-        self.register_buffer("var", torch.ones(obs_dim, dtype=torch.float64))
-        self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))
-
-    def normalise(self, raw_obs) -> np.ndarray:
-        return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
-
-    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
-        """Adds `raw_obs` to the statistics and returns it normalised by them (as RolloutPolicy.observe)."""
-        update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), raw_obs)
-        return self.normalise(raw_obs)
-
-    def forward(self, raw_obs) -> torch.Tensor:
-        return torch.from_numpy(self.normalise(raw_obs))
-
-
 def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
     torch.nn.init.orthogonal_(layer.weight, std)
     torch.nn.init.constant_(layer.bias, bias_const)
@@ -206,7 +157,13 @@ def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
 
 class Agent(nn.Module):
     """Actor and critic work on normalised observations; `obs_norm(raw)` produces them. Change the
-    networks here: the rollouts' numpy copy and the evaluation follow the modules (pgg_utils/fast.py)."""
+    networks here: the rollouts' numpy copy and the evaluation follow the modules (pgg_utils/fast.py).
+    The action distribution is `guided_policy`'s, the one place that defines it.
+
+    The rest of the project calls these methods (AGENT_METHODS, checked when training starts):
+    `get_value` and `policy` (the loss), `branches` (the diagnostics), `null_logstd` and
+    `unconditional_mean` (the rollouts, the sweep), `acting_policy` (`act`, pgg_utils/bc_null.py),
+    `act` (the sweep, users) and `reset` (the sweep, at each episode's start)."""
 
     def __init__(self, obs_dim: int, action_dim: int, obs_clip=10.0, null_dims=None, action_bounds=None):  # PGG
         super().__init__()
@@ -241,6 +198,9 @@ class Agent(nn.Module):
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
 
+    def reset(self) -> None:
+        """Begins an episode: a recurrent actor clears its state here (this one holds none)."""
+
     def null_input(self, obs):  # PGG
         """The actor's input of the unconditional branch: one row (the whole observation nulled), or one
         per row of `obs` with the null_dims replaced (torch tensors or numpy arrays)."""
@@ -250,60 +210,82 @@ class Agent(nn.Module):
             return torch.where(self.null_mask, self.null_obs, obs)  # PGG
         return np.where(self.null_mask.numpy(), self.null_obs.detach().numpy(), obs)  # PGG
 
+    def null_logstd(self) -> torch.Tensor:  # PGG
+        """log σ of pi(.|null), (1, action_dim): the policy's own, one σ for both branches (the paper's)."""
+        return self.actor_logstd  # PGG
+
     def unconditional_mean(self) -> torch.Tensor:  # PGG
         """Mean of pi(.|null), shape (action_dim,), with the whole observation nulled."""
-        return self.actor_mean(self.null_obs.unsqueeze(0))[0]  # PGG
+        return null_pass(self.actor_mean, self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_mean(  # PGG
-        self,  # PGG
-        obs: torch.Tensor,  # PGG
-        guidance: torch.Tensor | float | None,  # PGG
-        drop_mask: torch.Tensor | None = None,  # PGG
-    ) -> torch.Tensor:  # PGG
-        """Mean of pi_hat(.|obs) for a batch `obs` (B, obs_dim) of normalised observations. `guidance`
-        None means a run without guidance (PPO's own actor pass: the null embedding gets no gradient);
-        `drop_mask` (bool, (B,)) replaces those rows' conditional mean by the unconditional one."""
-        if guidance is None and drop_mask is None:  # PGG
-            return self.actor_mean(obs)  # PGG
-        # The null input rides along in the same actor pass: a separate one-row pass costs as much as
-        # the whole batch at this size (and can round differently from it).
-        null_in = self.null_input(obs)  # PGG
-        mean_cond, mean_null = self.actor_mean(torch.cat([obs, null_in])).split([len(obs), len(null_in)])  # PGG
+    def branches(self, obs: torch.Tensor, drop_mask=None) -> tuple["Gaussian", "Gaussian"]:  # PGG
+        """pi(.|s) and pi(.|null) for a batch `obs` (B, obs_dim) of normalised observations; `drop_mask`
+        (bool, (B,)) replaces those rows' conditional branch by the unconditional one."""
+        mean_cond, mean_null = branch_pass(self.actor_mean, obs, self.null_input(obs))  # PGG
         if drop_mask is not None:  # PGG
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)  # PGG
-        return guide(mean_cond, mean_null, 1.0 if guidance is None else guidance)  # PGG
+        return Gaussian(mean_cond, self.actor_logstd), Gaussian(mean_null, self.null_logstd())  # PGG
 
-    def acting_mean(self, raw_obs: np.ndarray, guidance, mean_null=None) -> np.ndarray:  # PGG
-        """The guided mean `act` samples around, float32 numpy, for a batch of raw observations."""
+    def policy(self, obs: torch.Tensor, guidance: torch.Tensor | float | None, drop_mask=None) -> "Gaussian":  # PGG
+        """pi_hat(.|obs) for a batch of normalised observations, the loss's. `guidance` None means a run
+        without guidance (PPO's own actor pass: the null embedding gets no gradient)."""
+        if guidance is None and drop_mask is None:  # PGG
+            return Gaussian(self.actor_mean(obs), self.actor_logstd)
+        return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
+
+    def acting_policy(self, raw_obs: np.ndarray, guidance, mean_null=None):  # PGG
+        """pi_hat for a batch of raw observations, in numpy (`act` samples from it); `mean_null` where the
+        caller holds the unconditional mean."""
         obs = self.obs_norm.normalise(raw_obs)
         mean_cond = evaluation_forward(self.actor_mean, obs)
         if self.null_mask is not None:  # PGG: one null input per row
             mean_null = evaluation_forward(self.actor_mean, self.null_input(obs))  # PGG
         elif mean_null is None:  # PGG
             mean_null = self.unconditional_mean().detach().numpy()  # PGG
-        return guide(mean_cond, mean_null, guidance)  # PGG
+        logstd, logstd_null = self.actor_logstd.detach(), self.null_logstd().detach()  # PGG
+        cond = Gaussian(mean_cond, logstd.numpy()[0], logstd.exp()[0].numpy())
+        null = Gaussian(mean_null, logstd_null.numpy()[0], logstd_null.exp()[0].numpy())  # PGG
+        return numpy_policy(guided_policy, cond, null, guidance)  # PGG
 
     @torch.no_grad()
     def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:  # PGG
         """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for raw
         observations (one, or a batch): normalised inside, sampled with standard normal `noise` shaped
-        like the actions (drawn from torch's generator if None) or the mean if `deterministic`, and
+        like the actions (drawn from torch's generator if None) or the mode if `deterministic`, and
         clipped to the task's bounds. `mean_null`: the unconditional mean where the caller holds it
-        (the sweep computes it once). The sweep acts through this method. ValueError, one line, for a
-        guidance outside training's rule ([0, 1000]) or an observation holding a NaN or an infinity."""
+        (the sweep computes it once). The sweep acts through this method. ValueError, one line, for an
+        observation of another shape than training's, a guidance outside training's rule ([0, 1000]) or
+        an observation holding a NaN or an infinity."""
         raw = np.asarray(raw_obs, dtype=np.float64)
+        if error := observation_error(raw, self.obs_norm.mean.shape) or guidance_none_error(guidance):  # PGG
+            raise ValueError(error)
         guidance = np.asarray(guidance, dtype=np.float64)  # PGG
         if error := acting_error(raw, guidance):  # PGG: training's and the sweep's guidance rule
             raise ValueError(error)
         single = raw.ndim == 1
-        mean = self.acting_mean(raw[None] if single else raw, guidance, mean_null)  # PGG
-        if not deterministic:
-            noise = torch.randn(mean.shape).numpy() if noise is None else np.asarray(noise, dtype=np.float32)
-            mean += self.actor_logstd.exp()[0].numpy() * noise
+        pi = self.acting_policy(raw[None] if single else raw, guidance, mean_null)  # PGG
+        if deterministic:
+            actions = pi.mode()
+        else:
+            shape = pi.mode().shape
+            actions = pi.sample(torch.randn(shape).numpy() if noise is None else np.asarray(noise, dtype=np.float32))
         if self.action_bounds is not None:
             low, high = self.action_bounds
-            mean = np.maximum(np.minimum(mean, high), low)
-        return mean[0] if single else mean
+            actions = np.maximum(np.minimum(actions, high), low)
+        return actions[0] if single else actions
+
+
+# The methods of Agent that the rest of the project calls, and who calls each (checked when training starts).
+AGENT_METHODS = {
+    "get_value": "the loss",
+    "policy": "the loss",
+    "branches": "guidance_diagnostics",  # PGG
+    "null_logstd": "the rollouts",  # PGG
+    "unconditional_mean": "the sweep",  # PGG
+    "acting_policy": "pgg_utils/bc_null.py",  # PGG
+    "act": "the sweep",
+    "reset": "the sweep",
+}
 
 
 def make_agent(args: dict, shapes: dict) -> Agent:
@@ -325,13 +307,64 @@ def guide(cond, null, guidance):  # PGG
     return np.asarray(1.0 - guidance, np.float32) * null + np.asarray(guidance, np.float32) * cond  # PGG
 
 
-def gaussian_log_prob(action, mean, logstd):
-    """log N(action; mean, exp(logstd)) summed over action dimensions."""
-    return (-0.5 * ((action - mean) * torch.exp(-logstd)).square() - logstd - LOG_SQRT_2PI).sum(-1)
+def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  # PGG
+    """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution: the loss,
+    the rollouts' numpy copy (checked against it when training starts) and `act` all take it from here.
+    For Gaussians the natural parameters mix, precision (1-γ)/σ_null² + γ/σ_s² and precision·mean
+    likewise; with one σ for both branches (this Agent's) that is the mean mix `guide` with σ unchanged,
+    computed so. Torch tensors or numpy arrays (`guidance` then a number or one per row). A fork that
+    changes the distribution (σ per branch, a squashed Gaussian, a Beta) changes this function; its distribution
+    has Gaussian's methods (mode, sample and sample_log_prob of noise, log_prob, entropy, kl)."""
+    return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std)  # PGG
 
 
-def gaussian_entropy(logstd):
-    return (0.5 + LOG_SQRT_2PI + logstd).sum(-1)
+class Gaussian:
+    """A diagonal Gaussian over actions, of torch tensors (the loss, the diagnostics) or numpy arrays
+    (rollouts, `act`): `mean` (B, action_dim); `logstd` and `std` = exp(logstd) broadcast against it,
+    `std` passed where the caller computed it (its bits are the caller's exp). The formulas are
+    torch.distributions.Normal's, summed over the action dimensions, written as the tables' runs
+    computed them (tests/test_equivalence.py holds them to Normal's)."""
+
+    def __init__(self, mean, logstd=None, std=None):
+        self.mean, self._logstd, self._std = mean, logstd, std
+
+    @property
+    def logstd(self):
+        if self._logstd is None:
+            self._logstd = torch.log(self._std) if torch.is_tensor(self._std) else np.log(self._std)
+        return self._logstd
+
+    @property
+    def std(self):
+        if self._std is None:
+            self._std = torch.exp(self._logstd) if torch.is_tensor(self._logstd) else np.exp(self._logstd)
+        return self._std
+
+    def mode(self):
+        return self.mean
+
+    def sample(self, noise):
+        """The sample of standard normal `noise` (shaped like the actions)."""
+        return self.mean + self.std * noise
+
+    def sample_log_prob(self, noise):
+        """(sample, its log-probability); log N(mean + σ·noise; mean, σ) is -noise²/2 - log σ - log √(2π)."""
+        return self.sample(noise), (-0.5 * (noise * noise) - self.logstd - LOG_SQRT_2PI).sum(-1)
+
+    def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
+        return (-0.5 * ((actions - self.mean) * torch.exp(-self.logstd)).square() - self.logstd - LOG_SQRT_2PI).sum(-1)
+
+    def entropy(self):
+        return (0.5 + LOG_SQRT_2PI + self.logstd).sum(-1)
+
+    def kl(self, other: "Gaussian"):
+        """KL(self || other), torch. With one σ, ½ Σ ((mean - other.mean)/σ)²."""
+        if self.logstd is other.logstd:
+            return 0.5 * ((self.mean - other.mean) * torch.exp(-other.logstd)).square().sum(-1)
+        return kl_divergence(Normal(self.mean, self.std), Normal(other.mean, other.std)).sum(-1)
+
+    def as_torch(self) -> "Gaussian":
+        return Gaussian(*(torch.from_numpy(np.ascontiguousarray(x)) for x in (self.mean, self.logstd, self.std)))
 
 
 # --- the behaviour policy, in numpy --------------------------------------------------------------
@@ -343,8 +376,8 @@ def gaussian_entropy(logstd):
 
 class RolloutPolicy:
     """pi_hat and the critic for acting during one rollout, on views of the agent's weights and
-    observation statistics (the weights are fixed until the update). It caches pi(.|null) and σ:
-    build one per rollout."""
+    observation statistics (the weights are fixed until the update): the networks' numpy copies and
+    guided_policy on their outputs (pgg_utils/policy.py). It caches pi(.|null) and σ: build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor_mean), numpy_network(agent.critic)
@@ -354,6 +387,8 @@ class RolloutPolicy:
         self.guidance = guidance  # PGG
         self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
+        self.logstd_null = agent.null_logstd().detach().numpy()[0].copy()  # PGG
+        self.std_null = np.exp(self.logstd_null)  # PGG
         self.null_input = None if agent.null_mask is None else agent.null_input  # PGG: per-row null inputs
         with torch.no_grad():  # PGG
             self.mean_null = agent.unconditional_mean().numpy()  # PGG
@@ -371,10 +406,10 @@ class RolloutPolicy:
         """(actions, log pi_hat(action|obs), values) for a batch `obs` of normalised observations;
         `noise` is standard normal, shaped like the actions."""
         mean_null = self.mean_null if self.null_input is None else self.actor(self.null_input(obs))  # PGG
-        mean = guide(self.actor(obs), mean_null, self.guidance)  # PGG
-        # log N(mean + std·noise; mean, std) per dimension is -noise²/2 - log std - log √(2π).
-        log_probs = (-0.5 * np.square(noise) - self.logstd - LOG_SQRT_2PI).sum(-1)
-        return mean + self.std * noise, log_probs, self.value(obs)
+        cond = Gaussian(self.actor(obs), self.logstd, self.std)
+        null = Gaussian(mean_null, self.logstd_null, self.std_null)  # PGG
+        actions, log_probs = numpy_policy(guided_policy, cond, null, self.guidance).sample_log_prob(noise)  # PGG
+        return actions, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
         return self.critic(obs)[:, 0]
@@ -465,12 +500,13 @@ def null_bc_loss(agent: Agent, obs: torch.Tensor, actions: torch.Tensor, route: 
     policy's σ held (it is the conditional policy's too). Route "null": the actor's weights are held for this
     term, so it trains the null embedding alone; "actor": it trains the shared actor as well."""
     null_in = agent.null_input(obs)  # PGG
-    if route == "null":  # PGG
-        held = {name: weight.detach() for name, weight in agent.actor_mean.named_parameters()}  # PGG
-        mean_null = torch.func.functional_call(agent.actor_mean, held, (null_in,))  # PGG
-    else:  # PGG
-        mean_null = agent.actor_mean(null_in)  # PGG
-    return -gaussian_log_prob(actions, mean_null, agent.actor_logstd.detach()).mean()  # PGG
+    with frozen(agent.actor_mean):  # PGG: a BatchNorm's statistics stay where they are
+        if route == "null":  # PGG
+            held = {name: weight.detach() for name, weight in agent.actor_mean.named_parameters()}  # PGG
+            mean_null = torch.func.functional_call(agent.actor_mean, held, (null_in,))  # PGG
+        else:  # PGG
+            mean_null = agent.actor_mean(null_in)  # PGG
+    return -Gaussian(mean_null, agent.null_logstd().detach()).log_prob(actions).mean()  # PGG
 
 
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
@@ -480,9 +516,9 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     the stats are detached tensors, not floats, so that the compiled version (--compile) runs without a
     break back to Python."""
     mb_obs = batch["obs"][mb_inds]
-    mean = agent.guided_mean(mb_obs, guidance, drop_mask)  # PGG
-    newlogprob = gaussian_log_prob(batch["actions"][mb_inds], mean, agent.actor_logstd)
-    entropy = gaussian_entropy(agent.actor_logstd)
+    pi = agent.policy(mb_obs, guidance, drop_mask)  # PGG
+    newlogprob = pi.log_prob(batch["actions"][mb_inds])
+    entropy = pi.entropy()
     newvalue = agent.get_value(mb_obs)
     logratio = newlogprob - batch["logprobs"][mb_inds]
     ratio = logratio.exp()
@@ -600,19 +636,16 @@ def ppo_update(
 
 @torch.no_grad()  # PGG
 def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:  # PGG
-    """How far guidance moves the policy, and what the unconditional branch has learned. With a
-    shared σ, KL(pi_hat || pi_s) = ½ Σ ((mu_hat - mu_s)/σ)² = ½ (γ-1)² Σ ((mu_s - mu_null)/σ)²."""
-    null_in = agent.null_input(obs)  # PGG
-    mean_cond, mean_null = agent.actor_mean(torch.cat([obs, null_in])).split([len(obs), len(null_in)])  # PGG
-    inv_std = torch.exp(-agent.actor_logstd)  # PGG
-    shift = (guide(mean_cond, mean_null, guidance) - mean_cond) * inv_std  # PGG
-    kl = (0.5 * shift.square().sum(-1)).mean().item()  # PGG
-    return {  # PGG
-        "pgg/guidance": guidance,  # PGG: γ_train of this iteration
-        "pgg/kl_guided_vs_conditional": kl,  # PGG
-        "pgg/unconditional_mean_norm": agent.unconditional_mean().norm().item(),  # PGG
-        "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
-    }  # PGG
+    """How far guidance moves the policy (KL(pi_hat || pi_s), which the adaptive schedule holds near its
+    target), and what the unconditional branch has learned; in eval mode, so no statistics move."""
+    with eval_mode(agent):  # PGG
+        cond, null = agent.branches(obs)  # PGG
+        kl = guided_policy(cond, null, guidance).kl(cond).mean().item()  # PGG
+        stats = {"pgg/guidance": guidance, "pgg/kl_guided_vs_conditional": kl}  # PGG: γ_train of this iteration
+        stats["pgg/unconditional_mean_norm"] = agent.unconditional_mean().norm().item()  # PGG
+    if isinstance(null_obs := getattr(agent, "null_obs", None), torch.Tensor):  # PGG: a fork may have a null head
+        stats["pgg/null_embedding_norm"] = null_obs.norm().item()  # PGG
+    return stats  # PGG
 
 
 # --- training ------------------------------------------------------------------------------------
@@ -623,21 +656,32 @@ def train(args: Args, run: runs.Run) -> None:
     continues from the last checkpoint bit for bit: the checkpoint holds the optimizer, the sub-envs
     mid-episode, the next observation and every RNG state."""
     resumed = run.checkpoint_to_resume()
-    writer = run.open_writer(resumed)
     runs.seed_everything(args)
 
     envs = make_vector_env(
         args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
     )
+    if len(envs.single_action_space.shape) != 1:
+        envs.close()
+        refuse(f"{args.env_id}'s actions have shape {envs.single_action_space.shape}; this script acts with a "
+               "vector (a 1-D Box): reshape them in make_env")  # fmt: skip
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
+    # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution.
+    probe = probe_observations(envs.single_observation_space)
+    noise = np.random.default_rng(1).standard_normal((len(probe), action_dim)).astype(np.float32)
+    if error := path_error(sys.modules[__name__], agent, args, probe, agent.obs_norm.normalise, noise):
+        envs.close()
+        refuse(error)
+    writer = run.open_writer(resumed)
     # The null embedding trains wherever the objective reads it: guidance or dropout at some iteration,
     # or any other term of the loss (probed on an empty rollout, with PPO's own actor pass). Outside it,
     # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
     # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
     null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim, action_dim), torch.zeros(2), torch.zeros(2))  # PGG
-    null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
+    with eval_mode(agent):  # PGG: a BatchNorm's statistics stay where they are
+        null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
     null_obs = dict(agent.named_parameters()).get("null_obs")  # PGG: none in a network without the null branch
     trains_null = guided or reads_parameter(null_probe_loss, null_obs)  # PGG
     trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
@@ -700,13 +744,15 @@ def train(args: Args, run: runs.Run) -> None:
 
 
 def checkpoint_shapes(envs) -> dict:
-    """What a checkpoint records of the task's spaces: the env's own action bounds, not ClipAction's ±inf."""
+    """What a checkpoint records of the task's spaces: the env's own action bounds, not ClipAction's ±inf;
+    `task_spaces`, the contract whatever evaluates the checkpoint compares with its task (pgg_utils/spaces.py)."""
     action_space = envs.unwrapped.envs[0].unwrapped.action_space
     return {
         "obs_dim": int(envs.single_observation_space.shape[0]),
         "action_dim": int(action_space.shape[0]),
         "action_low": action_space.low.tolist(),
         "action_high": action_space.high.tolist(),
+        "task_spaces": spaces.describe(envs.single_observation_space, action_space),
     }
 
 

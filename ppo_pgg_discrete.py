@@ -23,6 +23,7 @@ progress) is in `pgg_utils.runs`.
 from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
 
 # isort: split
+import sys
 from collections import defaultdict
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -33,7 +34,7 @@ import torch
 import tyro
 from torch import nn
 
-from pgg_utils import runs
+from pgg_utils import runs, spaces
 from pgg_utils.arguments import RunArgs, acting_error
 from pgg_utils.fast import (
     evaluation_forward,
@@ -42,6 +43,18 @@ from pgg_utils.fast import (
     standard_gumbel,
 )
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
+from pgg_utils.policy import (
+    branch_pass,
+    eval_mode,
+    frozen,
+    guidance_none_error,  # PGG
+    null_pass,  # PGG
+    numpy_policy,
+    observation_error,
+    path_error,
+    probe_observations,
+    refuse,
+)
 
 ACTION_SPACE = "discrete"  # the checkpoints' kind; the sweep picks this script by it
 
@@ -84,12 +97,19 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
     """stop the epochs early when the approximate KL (of the rows not dropped) exceeds this"""
 
 
-def make_env(env_id: str, video_dir: Path | None = None):
+def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None = None):
+    """The task as the agent sees it, for training, the sweep and --video alike. Every reported return (training's
+    charts/episodic_return, the sweep's) is RecordEpisodeStatistics' sum of the task's own rewards: reward shaping,
+    a reward scale or a frame stack goes after it, at the end of `thunk`. With `video_dir`, RecordVideo records
+    there; `render_mode` is gym.make's."""
+
     def thunk():
-        if video_dir is None:
-            return gym.make(env_id)
-        env = gym.make(env_id, render_mode="rgb_array")
-        return gym.wrappers.RecordVideo(env, str(video_dir), disable_logger=True)
+        render = {"render_mode": "rgb_array"} if video_dir is not None else {"render_mode": render_mode}
+        env = gym.make(env_id, **(render if render["render_mode"] else {}))  # a task may take no render_mode
+        if video_dir is not None:
+            env = gym.wrappers.RecordVideo(env, str(video_dir), disable_logger=True)
+        # The task's own returns: a wrapper that changes rewards wraps what this line returns.
+        return gym.wrappers.RecordEpisodeStatistics(env)
 
     return thunk
 
@@ -97,14 +117,11 @@ def make_env(env_id: str, video_dir: Path | None = None):
 def make_vector_env(env_id: str, num_envs: int, seed: int, video_dir: Path | None = None) -> gym.vector.VectorEnv:
     """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE
     below relies on): the observation returned with done=True is the next episode's first one.
-    Episode statistics are recorded per sub-env, as in CleanRL, cheaper than gymnasium 1.4's vector
+    Episode statistics are recorded per sub-env (in make_env), as in CleanRL, cheaper than gymnasium 1.4's vector
     wrapper. With `video_dir`, the first sub-env's episodes are recorded there (on CleanRL's
     schedule: episodes 0, 1, 8, 27, ..., 1000, 2000, ...)."""
     envs = gym.vector.SyncVectorEnv(
-        [
-            lambda i=i: gym.wrappers.RecordEpisodeStatistics(make_env(env_id, video_dir if i == 0 else None)())
-            for i in range(num_envs)
-        ],
+        [lambda i=i: make_env(env_id, video_dir if i == 0 else None)() for i in range(num_envs)],
         autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
     )
     envs.action_space.seed(seed)
@@ -119,7 +136,12 @@ def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
 
 class Agent(nn.Module):
     """Change the networks here: the rollouts' numpy copy and the evaluation follow the modules
-    (pgg_utils/fast.py)."""
+    (pgg_utils/fast.py). The action distribution is `guided_policy`'s, the one place that defines it.
+
+    The rest of the project calls these methods (AGENT_METHODS, checked when training starts):
+    `get_value` and `policy` (the loss), `branches` (the diagnostics), `unconditional_logits` (the
+    rollouts, the sweep), `acting_policy` (`act`, pgg_utils/bc_null.py), `act` (the sweep, users) and
+    `reset` (the sweep, at each episode's start)."""
 
     def __init__(self, obs_dim: int, n_actions: int):
         super().__init__()
@@ -141,57 +163,75 @@ class Agent(nn.Module):
         # from the RNG, so with the same seed every other weight is initialised exactly as in PPO;
         # and 0 is a neutral point of the input space.
         self.null_obs = nn.Parameter(torch.zeros(obs_dim))  # PGG
+        self.obs_shape = (obs_dim,)  # what `act` takes
 
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
 
+    def reset(self) -> None:
+        """Begins an episode: a recurrent actor clears its state here (this one holds none)."""
+
     def unconditional_logits(self) -> torch.Tensor:  # PGG
         """Logits of pi(.|null), shape (n_actions,); one actor pass whatever the batch size."""
-        return self.actor(self.null_obs.unsqueeze(0))[0]  # PGG
+        return null_pass(self.actor, self.null_obs.unsqueeze(0))[0]  # PGG
 
-    def guided_logits(  # PGG
-        self,  # PGG
-        obs: torch.Tensor,  # PGG
-        guidance: torch.Tensor | float | None,  # PGG
-        drop_mask: torch.Tensor | None = None,  # PGG
-    ) -> torch.Tensor:  # PGG
-        """Logits of pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim). `guidance` None means a run
-        without guidance (PPO's own actor pass: the null embedding gets no gradient); `drop_mask`
-        (bool, (B,)) replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
-        if guidance is None and drop_mask is None:  # PGG
-            return self.actor(obs)  # PGG
-        # The null embedding rides along as one extra row of the same actor pass: a separate one-row
-        # pass costs as much as the whole batch at this size (and can round differently from it).
-        logits_cond, logits_null = self.actor(torch.cat([obs, self.null_obs.unsqueeze(0)])).split([len(obs), 1])  # PGG
+    def branches(self, obs: torch.Tensor, drop_mask=None) -> tuple["Categorical", "Categorical"]:  # PGG
+        """pi(.|s) and pi(.|null) for a batch `obs` of shape (B, obs_dim); `drop_mask` (bool, (B,))
+        replaces those rows' conditional branch by the unconditional one (conditioning dropout)."""
+        logits_cond, logits_null = branch_pass(self.actor, obs, self.null_obs.unsqueeze(0))  # PGG
         if drop_mask is not None:  # PGG
             logits_cond = torch.where(drop_mask.unsqueeze(-1), logits_null, logits_cond)  # PGG
-        return guide(logits_cond, logits_null, 1.0 if guidance is None else guidance)  # PGG
+        return Categorical(logits_cond), Categorical(logits_null)  # PGG
 
-    def acting_logits(self, obs: np.ndarray, guidance, logits_null=None) -> np.ndarray:  # PGG
-        """The guided logits `act` samples from, float32 numpy, for a float32 batch `obs`."""
+    def policy(self, obs: torch.Tensor, guidance: torch.Tensor | float | None, drop_mask=None) -> "Categorical":  # PGG
+        """pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim), the loss's. `guidance` None means a run
+        without guidance (PPO's own actor pass: the null embedding gets no gradient)."""
+        if guidance is None and drop_mask is None:  # PGG
+            return Categorical(self.actor(obs))
+        return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
+
+    def acting_policy(self, obs: np.ndarray, guidance, logits_null=None):  # PGG
+        """pi_hat for a float32 batch `obs`, in numpy (`act` samples from it); `logits_null` where the
+        caller holds the unconditional branch."""
         logits_cond = evaluation_forward(self.actor, obs)
         if logits_null is None:  # PGG
             logits_null = self.unconditional_logits().detach().numpy()  # PGG
-        return guide(logits_cond, logits_null, guidance)  # PGG
+        return numpy_policy(guided_policy, Categorical(logits_cond), Categorical(logits_null), guidance)  # PGG
 
     @torch.no_grad()
     def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:  # PGG
         """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for observations
         (one, or a batch): sampled by the Gumbel-max trick with standard Gumbel `noise` shaped like the
-        logits (drawn from torch's generator if None), or the argmax if `deterministic`. `logits_null`:
+        logits (drawn from torch's generator if None), or the mode if `deterministic`. `logits_null`:
         the unconditional branch where the caller holds it (the sweep computes it once, or takes zeros
-        for its uniform-null control). The sweep acts through this method. ValueError, one line, for a
-        guidance outside training's rule ([0, 1000]) or an observation holding a NaN or an infinity."""
+        for its uniform-null control). The sweep acts through this method. ValueError, one line, for an
+        observation of another shape than training's, a guidance outside training's rule ([0, 1000]) or
+        an observation holding a NaN or an infinity."""
         obs = np.asarray(obs, dtype=np.float32)
+        if error := observation_error(obs, self.obs_shape) or guidance_none_error(guidance):  # PGG
+            raise ValueError(error)
         guidance = np.asarray(guidance, dtype=np.float64)  # PGG
         if error := acting_error(obs, guidance):  # PGG: training's and the sweep's guidance rule
             raise ValueError(error)
         single = obs.ndim == 1
-        logits = self.acting_logits(obs[None] if single else obs, guidance, logits_null)  # PGG
-        if not deterministic:
-            logits += gumbel_noise(*logits.shape) if noise is None else np.asarray(noise, dtype=np.float32)
-        actions = logits.argmax(-1)
+        pi = self.acting_policy(obs[None] if single else obs, guidance, logits_null)  # PGG
+        if deterministic:
+            actions = pi.mode()
+        else:
+            actions = pi.sample(gumbel_noise(*pi.logits.shape) if noise is None else np.asarray(noise, np.float32))
         return actions[0] if single else actions
+
+
+# The methods of Agent that the rest of the project calls, and who calls each (checked when training starts).
+AGENT_METHODS = {
+    "get_value": "the loss",
+    "policy": "the loss",
+    "branches": "guidance_diagnostics",  # PGG
+    "unconditional_logits": "the sweep",  # PGG
+    "acting_policy": "pgg_utils/bc_null.py",  # PGG
+    "act": "the sweep",
+    "reset": "the sweep",
+}
 
 
 def make_agent(args: dict, shapes: dict) -> Agent:
@@ -212,6 +252,59 @@ def guide(cond, null, guidance):  # PGG
     return np.asarray(1.0 - guidance, np.float32) * null + np.asarray(guidance, np.float32) * cond  # PGG
 
 
+def guided_policy(cond: "Categorical", null: "Categorical", guidance) -> "Categorical":  # PGG
+    """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution: the loss,
+    the rollouts' numpy copy (checked against it when training starts) and `act` all take it from here.
+    For categoricals the natural parameters, the logits, mix. Torch tensors or numpy arrays (`guidance`
+    then a number or one per row). A fork that changes the distribution changes this function; its distribution
+    has Categorical's methods (mode, sample and sample_log_prob of noise, log_prob, entropy, kl)."""
+    return Categorical(guide(cond.logits, null.logits, guidance))  # PGG
+
+
+class Categorical:
+    """A categorical distribution over actions from `logits` (..., n_actions), of torch tensors (the loss,
+    the diagnostics) or numpy arrays (rollouts, `act`), with the arithmetic the tables' runs used
+    (tests/test_equivalence.py holds it to torch.distributions.Categorical). Its log-softmax is computed
+    once: the loss's log-probabilities and entropy share one node of the graph. Samples by the Gumbel-max
+    trick: argmax(logits + standard Gumbel noise)."""
+
+    def __init__(self, logits):
+        self.logits, self._log_softmax = logits, None
+
+    @property
+    def log_softmax(self) -> torch.Tensor:
+        if self._log_softmax is None:
+            self._log_softmax = self.logits.log_softmax(-1)
+        return self._log_softmax
+
+    def mode(self):
+        return self.logits.argmax(-1)
+
+    def sample(self, gumbel):
+        return (self.logits + gumbel).argmax(-1)
+
+    def sample_log_prob(self, gumbel):
+        actions = self.sample(gumbel)
+        return actions, self.log_prob(actions)
+
+    def log_prob(self, actions):
+        if torch.is_tensor(self.logits):
+            return self.log_softmax.gather(-1, actions.unsqueeze(-1)).squeeze(-1)
+        # In numpy, the log-softmax of the given actions only: a third of the cost of the full one.
+        shifted = self.logits - self.logits.max(-1, keepdims=True)
+        return shifted[np.arange(len(actions)), actions] - np.log(np.exp(shifted).sum(-1))
+
+    def entropy(self) -> torch.Tensor:
+        return -(self.log_softmax.exp() * self.log_softmax).sum(-1)
+
+    def kl(self, other: "Categorical") -> torch.Tensor:
+        """KL(self || other), torch."""
+        return (self.log_softmax.exp() * (self.log_softmax - other.log_softmax)).sum(-1)
+
+    def as_torch(self) -> "Categorical":
+        return Categorical(torch.from_numpy(np.ascontiguousarray(self.logits)))
+
+
 def gumbel_noise(*shape: int) -> np.ndarray:
     """Standard Gumbel noise, float32, from torch's generator (Gumbel-max sampling: fast.standard_gumbel)."""
     return standard_gumbel(torch.rand(*shape).numpy())
@@ -226,7 +319,8 @@ def gumbel_noise(*shape: int) -> np.ndarray:
 
 class RolloutPolicy:
     """pi_hat and the critic for acting during one rollout, on views of the agent's weights (they are
-    fixed until the update). It caches pi(.|null): build one per rollout."""
+    fixed until the update): the networks' numpy copies and guided_policy on their outputs
+    (pgg_utils/policy.py). It caches pi(.|null): build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor), numpy_network(agent.critic)
@@ -238,11 +332,8 @@ class RolloutPolicy:
     def act(self, obs: np.ndarray, gumbel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs`. Actions are sampled by the
         Gumbel-max trick with `gumbel`, standard Gumbel noise shaped like the logits."""
-        logits = guide(self.actor(obs), self.logits_null, self.guidance)  # PGG
-        actions = (logits + gumbel).argmax(-1)
-        shifted = logits - logits.max(-1, keepdims=True)
-        # The log-softmax of the sampled actions only: a third of the cost of the full one.
-        log_probs = shifted[np.arange(len(actions)), actions] - np.log(np.exp(shifted).sum(-1))
+        cond, null = Categorical(self.actor(obs)), Categorical(self.logits_null)  # PGG
+        actions, log_probs = numpy_policy(guided_policy, cond, null, self.guidance).sample_log_prob(gumbel)  # PGG
         return actions, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
@@ -327,12 +418,13 @@ def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, dis
 def null_bc_loss(agent: Agent, actions: torch.Tensor, route: str) -> torch.Tensor:  # PGG
     """Mean -log pi(a|null) of the rollout's actions: behaviour cloning by the unconditional branch. Route
     "null": the actor's weights are held for this term, so it trains the null embedding alone; "actor": it
-    trains the shared actor as well."""
-    if route == "null":  # PGG
-        held = {name: weight.detach() for name, weight in agent.actor.named_parameters()}  # PGG
-        logits_null = torch.func.functional_call(agent.actor, held, (agent.null_obs.unsqueeze(0),))  # PGG
-    else:  # PGG
-        logits_null = agent.actor(agent.null_obs.unsqueeze(0))  # PGG
+    trains the shared actor as well. In eval mode: a BatchNorm takes the one row and keeps its statistics."""
+    with frozen(agent.actor):  # PGG
+        if route == "null":  # PGG
+            held = {name: weight.detach() for name, weight in agent.actor.named_parameters()}  # PGG
+            logits_null = torch.func.functional_call(agent.actor, held, (agent.null_obs.unsqueeze(0),))  # PGG
+        else:  # PGG
+            logits_null = agent.actor(agent.null_obs.unsqueeze(0))  # PGG
     return nn.functional.cross_entropy(logits_null.expand(len(actions), -1), actions)  # PGG
 
 
@@ -343,9 +435,9 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     the stats are detached tensors, not floats, so that the compiled version (--compile) runs without a
     break back to Python."""
     mb_obs = batch["obs"][mb_inds]
-    logp_all = agent.guided_logits(mb_obs, guidance, drop_mask).log_softmax(-1)  # PGG
-    newlogprob = logp_all.gather(-1, batch["actions"][mb_inds].unsqueeze(-1)).squeeze(-1)
-    entropy = -(logp_all.exp() * logp_all).sum(-1)
+    pi = agent.policy(mb_obs, guidance, drop_mask)  # PGG
+    newlogprob = pi.log_prob(batch["actions"][mb_inds])
+    entropy = pi.entropy()
     newvalue = agent.get_value(mb_obs)
     logratio = newlogprob - batch["logprobs"][mb_inds]
     ratio = logratio.exp()
@@ -462,17 +554,16 @@ def ppo_update(
 
 @torch.no_grad()  # PGG
 def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:  # PGG
-    """How far guidance moves the policy, and what the unconditional branch has learned."""
-    logits_cond, logits_null = agent.actor(torch.cat([obs, agent.null_obs.unsqueeze(0)])).split([len(obs), 1])  # PGG
-    logp_guided = guide(logits_cond, logits_null, guidance).log_softmax(-1)  # PGG
-    logp_cond = logits_cond.log_softmax(-1)  # PGG
-    logp_null = logits_null[0].log_softmax(-1)  # PGG
-    return {  # PGG
-        "pgg/guidance": guidance,  # PGG: γ_train of this iteration
-        "pgg/kl_guided_vs_conditional": (logp_guided.exp() * (logp_guided - logp_cond)).sum(-1).mean().item(),  # PGG
-        "pgg/entropy_unconditional": -(logp_null.exp() * logp_null).sum().item(),  # PGG
-        "pgg/null_embedding_norm": agent.null_obs.norm().item(),  # PGG
-    }  # PGG
+    """How far guidance moves the policy (KL(pi_hat || pi_s), which the adaptive schedule holds near its
+    target), and what the unconditional branch has learned; in eval mode, so no statistics move."""
+    with eval_mode(agent):  # PGG
+        cond, null = agent.branches(obs)  # PGG
+        kl = guided_policy(cond, null, guidance).kl(cond).mean().item()  # PGG
+        stats = {"pgg/guidance": guidance, "pgg/kl_guided_vs_conditional": kl}  # PGG: γ_train of this iteration
+        stats["pgg/entropy_unconditional"] = null.entropy().sum().item()  # PGG
+    if isinstance(null_obs := getattr(agent, "null_obs", None), torch.Tensor):  # PGG: a fork may have a null head
+        stats["pgg/null_embedding_norm"] = null_obs.norm().item()  # PGG
+    return stats  # PGG
 
 
 # --- training ------------------------------------------------------------------------------------
@@ -483,19 +574,30 @@ def train(args: Args, run: runs.Run) -> None:
     continues from the last checkpoint bit for bit: the checkpoint holds the optimizer, the sub-envs
     mid-episode, the next observation and every RNG state."""
     resumed = run.checkpoint_to_resume()
-    writer = run.open_writer(resumed)
     runs.seed_everything(args)
 
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
+    if (start := int(envs.single_action_space.start)) != 0:
+        envs.close()
+        refuse(f"{args.env_id}'s actions start at {start}; this script acts with 0..n-1: shift them in make_env "
+               "(gymnasium.wrappers.TransformAction) or start the space at 0")  # fmt: skip
     obs_dim = envs.single_observation_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
+    # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution.
+    probe = probe_observations(envs.single_observation_space)
+    gumbel = standard_gumbel(np.random.default_rng(1).random((len(probe), envs.single_action_space.n), np.float32))
+    if error := path_error(sys.modules[__name__], agent, args, probe, lambda raw: raw.astype(np.float32), gumbel):
+        envs.close()
+        refuse(error)
+    writer = run.open_writer(resumed)
     # The null embedding trains wherever the objective reads it: guidance or dropout at some iteration,
     # or any other term of the loss (probed on an empty rollout, with PPO's own actor pass). Outside it,
     # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
     # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
     null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim), torch.zeros(2), torch.zeros(2))  # PGG
-    null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
+    with eval_mode(agent):  # PGG: a BatchNorm's statistics stay where they are
+        null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
     null_obs = dict(agent.named_parameters()).get("null_obs")  # PGG: none in a network without the null branch
     trains_null = guided or reads_parameter(null_probe_loss, null_obs)  # PGG
     trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
@@ -557,8 +659,13 @@ def train(args: Args, run: runs.Run) -> None:
 
 
 def checkpoint_shapes(envs) -> dict:
-    """What a checkpoint records of the task's spaces."""
-    return {"obs_dim": int(envs.single_observation_space.shape[0]), "n_actions": int(envs.single_action_space.n)}
+    """What a checkpoint records of the task's spaces; `task_spaces`, the contract whatever evaluates the
+    checkpoint compares with its task (pgg_utils/spaces.py)."""
+    return {
+        "obs_dim": int(envs.single_observation_space.shape[0]),
+        "n_actions": int(envs.single_action_space.n),
+        "task_spaces": spaces.describe(envs.single_observation_space, envs.single_action_space),
+    }
 
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:

@@ -28,6 +28,9 @@ BEYOND_VARIANTS = {
     "pgg_g1.1_goal": ("--guidance", "1.1", "--null-dims", "{goal}"),
     # the unconditional branch clones the rollout's actions, the null embedding alone (results/beyond/bc_train's pilot)
     "pgg_g1.1_bc0.1": ("--guidance", "1.1", "--null-bc-coef", "0.1"),
+    # the null on the command of paper_study/cheetah_velocity.py (its COMMAND_INDEX, 17): π(a|s, ∅) is a
+    # command-agnostic policy and γ > 1 amplifies what the command adds (results/beyond/command)
+    "pgg_g1.1_null17": ("--guidance", "1.1", "--null-dims", "17"),
 }  # fmt: skip
 
 

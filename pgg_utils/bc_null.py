@@ -60,14 +60,14 @@ def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) 
         while running.any():
             rows = np.flatnonzero(running)
             if ckpt["action_space"] == "discrete":
-                logits = agent.acting_logits(obs[rows].astype(np.float32), 1.0)
+                logits = agent.acting_policy(obs[rows].astype(np.float32), 1.0).logits
                 gumbel = np.stack([rngs[i].gumbel(size=logits.shape[-1]) for i in rows])
                 actions = (logits + gumbel).argmax(-1)
                 env_actions = actions
             else:
-                mean = agent.acting_mean(obs[rows], 1.0)
-                noise = np.stack([rngs[i].standard_normal(mean.shape[-1]) for i in rows])
-                actions = mean + agent.actor_logstd.exp()[0].numpy() * noise
+                policy = agent.acting_policy(obs[rows], 1.0)
+                noise = np.stack([rngs[i].standard_normal(policy.mode().shape[-1]) for i in rows])
+                actions = policy.sample(noise)
                 env_actions = np.clip(actions, *agent.action_bounds) if agent.action_bounds is not None else actions
             seen_actions.append(actions)
             for j, i in enumerate(rows):

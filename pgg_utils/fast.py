@@ -1,9 +1,13 @@
 """Speed, not algorithm: what makes the scripts' small networks cheap on a CPU, with the same float
 arithmetic (measured in benchmarks/README.md, equality tested in tests/test_equivalence.py)."""
 
+from contextlib import nullcontext
+
 import numpy as np
 import torch
 from torch import nn
+
+from pgg_utils.policy import eval_mode, mode_dependent
 
 
 def flatten_parameters(params: list[nn.Parameter]) -> nn.Parameter:
@@ -69,8 +73,12 @@ def numpy_steps(module: nn.Module):
 
 
 def torch_forward(module: nn.Module):
+    """`module`'s own forward on a float32 numpy batch, frozen where its training mode couples rows or draws noise
+    (pgg_utils/policy.py): a rollout acts as a function of each observation alone, moving no statistics."""
+    freeze = eval_mode if mode_dependent(module) else nullcontext
+
     def forward(x: np.ndarray) -> np.ndarray:
-        with torch.no_grad():
+        with torch.no_grad(), freeze(module):
             return module(torch.from_numpy(np.ascontiguousarray(x, dtype=np.float32))).numpy()
 
     return forward

@@ -371,7 +371,9 @@ def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
     for path in [*beyond.glob("*/episodes.csv"), *beyond.glob("*/heldout_gamma.csv"), *beyond.glob("*.csv"),
                  *beyond.glob(f"{beyond_report.BC_FOLDER}/*.csv"),
                  *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/episodes.csv"),
-                 *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_gamma.csv")]:  # fmt: skip
+                 *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_gamma.csv"),
+                 *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_fresh.csv"),
+                 *beyond.glob(f"{beyond_report.COMMAND_FOLDER}/*.csv")]:  # fmt: skip
         (tmp_path / path.relative_to(beyond)).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / path.relative_to(beyond)).write_bytes(path.read_bytes())
     continuous = ROOT / "results" / "continuous"

@@ -40,18 +40,18 @@ def test_guided_gaussian_is_normalised_product(guidance):
         agent.actor_logstd.fill_(-0.3)
     obs = torch.randn(4, 3, dtype=torch.float64)
     with torch.no_grad():
-        mean_hat = agent.guided_mean(obs, guidance)
+        mean_hat = agent.policy(obs, guidance).mean
         mean_cond = agent.actor_mean(obs)
         mean_null = agent.actor_mean(agent.null_obs.unsqueeze(0))
     grid = torch.linspace(-15, 15, 30001, dtype=torch.float64).unsqueeze(-1)  # (G, 1) actions
     logstd = agent.actor_logstd.detach()
     for i in range(4):
-        log_unnormalised = (1 - guidance) * pgg.gaussian_log_prob(grid, mean_null, logstd) + guidance * (
-            pgg.gaussian_log_prob(grid, mean_cond[i], logstd)
+        log_unnormalised = (1 - guidance) * pgg.Gaussian(mean_null, logstd).log_prob(grid) + guidance * (
+            pgg.Gaussian(mean_cond[i], logstd).log_prob(grid)
         )
         density = log_unnormalised.exp()
         density = density / torch.trapezoid(density, grid.squeeze(-1))
-        expected = pgg.gaussian_log_prob(grid, mean_hat[i], logstd).exp()
+        expected = pgg.Gaussian(mean_hat[i], logstd).log_prob(grid).exp()
         torch.testing.assert_close(density, expected, rtol=1e-6, atol=1e-9)
     if guidance == 1.0:
         assert torch.equal(mean_hat, mean_cond)
@@ -67,7 +67,7 @@ def null_grad(guidance, cond_dropout):
     buf.obs.normal_()
     buf.actions.normal_()
     with torch.no_grad():
-        buf.logprobs.copy_(pgg.gaussian_log_prob(buf.actions, torch.zeros(2), agent.actor_logstd))
+        buf.logprobs.copy_(pgg.Gaussian(torch.zeros(2), agent.actor_logstd).log_prob(buf.actions))
     args = pgg.Args(guidance=guidance, cond_dropout=cond_dropout, update_epochs=1, num_minibatches=1)
     guidance = torch.tensor(args.guidance) if uses_null_branch(args) else None  # as train() decides
     pgg.ppo_update(agent, optimizer, buf, torch.randn(32, 1), torch.randn(32, 1), args, guidance)
@@ -86,12 +86,11 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_mean(self):
-        return torch.zeros(
-            self.actor_logstd.shape[-1]
-        )  # never used: `guide` is patched to return the conditional branch
+        return torch.zeros(self.actor_logstd.shape[-1])  # `guide` is patched to return the conditional branch
 
-    def guided_mean(self, obs, guidance, drop_mask=None):
-        return self.actor_mean(obs)
+    def branches(self, obs, drop_mask=None):
+        cond = pgg.Gaussian(self.actor_mean(obs), self.actor_logstd)
+        return cond, cond  # `guide` is patched to return the conditional branch
 
 
 def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
@@ -113,7 +112,7 @@ agent, _ = pgg.load_checkpoint(sys.argv[2])
 raw = torch.tensor(json.loads(sys.argv[3]), dtype=torch.float64)
 before = {k: v.clone() for k, v in agent.obs_norm.state_dict().items()}
 with torch.no_grad():
-    mean = agent.guided_mean(agent.obs_norm(raw), 1.1)
+    mean = agent.policy(agent.obs_norm(raw), 1.1).mean
 assert all(torch.equal(v, agent.obs_norm.state_dict()[k]) for k, v in before.items())
 print(json.dumps(mean.double().tolist()))
 """
@@ -127,8 +126,8 @@ def test_checkpoint_carries_observation_statistics(tmp_path):
     assert float(agent.obs_norm.count) > 1000 and agent.obs_norm.mean.abs().sum() > 0
     raw = np.random.default_rng(0).normal(size=(3, 11)) * 2 + 1
     with torch.no_grad():
-        in_process = agent.guided_mean(agent.obs_norm(raw), 1.1)
-        unnormalised = agent.guided_mean(torch.as_tensor(raw, dtype=torch.float32).clamp(-10, 10), 1.1)
+        in_process = agent.policy(agent.obs_norm(raw), 1.1).mean
+        unnormalised = agent.policy(torch.as_tensor(raw, dtype=torch.float32).clamp(-10, 10), 1.1).mean
     assert not torch.allclose(in_process, unnormalised, atol=1e-3)  # the statistics matter
     out = subprocess.run(
         [sys.executable, "-c", CHECK_IN_FRESH_PROCESS, str(ROOT), str(runs.checkpoint_path(run_dir, 1024)),
@@ -165,7 +164,9 @@ def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
     wrapper), stepped with the same actions: every observation a reset or step returns, terminal ones
     included, in the same order. Hopper with a 25-step time limit ends episodes both ways."""
     short = lambda env_id, video_dir=None: (
-        lambda: gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25))
+        lambda: gym.wrappers.RecordEpisodeStatistics(
+            gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25))
+        )
     )
     monkeypatch.setattr(pgg, "make_env", short)
     envs = pgg.make_vector_env("Hopper-v4", 1, seed=3, discount=0.99, reward_clip=10.0)
@@ -254,7 +255,7 @@ def test_short_inverted_pendulum_run_learns(tmp_path):
         done, total = False, 0.0
         while not done:
             with torch.no_grad():
-                action = agent.guided_mean(agent.obs_norm(obs[None]), 1.1)[0].numpy()
+                action = agent.policy(agent.obs_norm(obs[None]), 1.1).mean[0].numpy()
             obs, reward, terminated, truncated, _ = env.step(action)
             total, done = total + reward, terminated or truncated
         returns.append(total)

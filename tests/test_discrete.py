@@ -38,9 +38,9 @@ class FixedLogits(nn.Module):
     def forward(self, x):
         if len(x) == 1:  # unconditional_logits()
             return self.null
-        if len(x) == len(self.cond):  # guided_logits at γ=1: the batch alone
+        if len(x) == len(self.cond):  # policy at γ=1: the batch alone
             return self.cond
-        return torch.cat([self.cond, self.null])  # guided_logits: the batch plus the null row
+        return torch.cat([self.cond, self.null])  # policy: the batch plus the null row
 
 
 def FixedLogitsAgent(logits_cond, logits_null):
@@ -54,7 +54,7 @@ def test_guided_policy_is_normalised_product(guidance):
     torch.manual_seed(0)
     logits_cond, logits_null = torch.randn(16, 5, dtype=torch.float64), torch.randn(5, dtype=torch.float64)
     agent = FixedLogitsAgent(logits_cond, logits_null).double()
-    guided = agent.guided_logits(torch.zeros(16, 1, dtype=torch.float64), guidance).softmax(-1)
+    guided = agent.policy(torch.zeros(16, 1, dtype=torch.float64), guidance).logits.softmax(-1)
     unnormalised = logits_null.softmax(-1) ** (1 - guidance) * logits_cond.softmax(-1) ** guidance
     expected = unnormalised / unnormalised.sum(-1, keepdim=True)
     torch.testing.assert_close(guided, expected, rtol=1e-10, atol=1e-12)
@@ -68,7 +68,7 @@ def test_guided_policy_is_normalised_product(guidance):
 def test_large_guidance_stays_finite(guidance):
     torch.manual_seed(0)
     agent = FixedLogitsAgent(10 * torch.randn(64, 3), 10 * torch.randn(3))
-    logp = agent.guided_logits(torch.zeros(64, 1), guidance).log_softmax(-1)
+    logp = agent.policy(torch.zeros(64, 1), guidance).logits.log_softmax(-1)
     assert torch.isfinite(logp.exp()).all() and torch.allclose(logp.exp().sum(-1), torch.ones(64))
     assert torch.isfinite(-(logp.exp() * logp.clamp_min(-1e30)).sum(-1)).all()
 
@@ -86,7 +86,7 @@ def test_policy_gradient_identity_normaliser_vanishes():
     params = list(agent.actor.parameters()) + [agent.null_obs]
 
     def grads(advantage_fn):
-        logp_hat = agent.guided_logits(obs, guidance).log_softmax(-1)[0]
+        logp_hat = agent.policy(obs, guidance).logits.log_softmax(-1)[0]
         pi_hat = logp_hat.exp().detach()
         advantages = advantage_fn(pi_hat)
         lhs = torch.autograd.grad((pi_hat * advantages * logp_hat).sum(), params)
@@ -141,12 +141,11 @@ class VanillaAgent(pgg.Agent):
         del self.null_obs
 
     def unconditional_logits(self):
-        return torch.zeros(
-            self.actor[-1].out_features
-        )  # never used: `guide` is patched to return the conditional branch
+        return torch.zeros(self.actor[-1].out_features)  # `guide` is patched to return the conditional branch
 
-    def guided_logits(self, obs, guidance, drop_mask=None):
-        return self.actor(obs)
+    def branches(self, obs, drop_mask=None):
+        cond = pgg.Categorical(self.actor(obs))
+        return cond, cond  # `guide` is patched to return the conditional branch
 
 
 def test_guidance_one_is_exactly_vanilla_ppo(tmp_path, monkeypatch):
@@ -187,7 +186,8 @@ class CountdownEnv(gym.Env):
 
 def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     lengths = [3, 5]
-    monkeypatch.setattr(pgg, "make_env", lambda env_id, video_dir=None: lambda: CountdownEnv(lengths.pop(0)))
+    countdown = lambda: gym.wrappers.RecordEpisodeStatistics(CountdownEnv(lengths.pop(0)))  # as make_env records
+    monkeypatch.setattr(pgg, "make_env", lambda env_id, video_dir=None: countdown)
     envs = pgg.make_vector_env("unused", 2, seed=0)
     obs, _ = envs.reset(seed=0)
     buf = pgg.Rollout.empty(7, 2, 2)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 from scipy import stats
-from torch.distributions import Categorical, Normal
+from torch.distributions import Categorical, Normal, kl_divergence
 
 import ppo_pgg_continuous as continuous
 import ppo_pgg_discrete as discrete
@@ -28,18 +28,32 @@ def test_gumbel_max_sampling_matches_categorical_probabilities():
 def test_categorical_log_prob_and_entropy_match_torch_distributions():
     torch.manual_seed(0)
     logits, actions = torch.randn(64, 5), torch.randint(0, 5, (64,))
-    logp_all = logits.log_softmax(-1)
-    reference = Categorical(logits=logits)
-    torch.testing.assert_close(logp_all.gather(-1, actions.unsqueeze(-1)).squeeze(-1), reference.log_prob(actions))
-    torch.testing.assert_close(-(logp_all.exp() * logp_all).sum(-1), reference.entropy())
+    ours, reference = discrete.Categorical(logits), Categorical(logits=logits)
+    torch.testing.assert_close(ours.log_prob(actions), reference.log_prob(actions))
+    torch.testing.assert_close(ours.entropy(), reference.entropy())
+    other = torch.randn(64, 5)
+    torch.testing.assert_close(
+        ours.kl(discrete.Categorical(other)), kl_divergence(reference, Categorical(logits=other))
+    )
+    numpy_log_prob = discrete.Categorical(logits.numpy()).log_prob(actions.numpy())
+    torch.testing.assert_close(torch.from_numpy(numpy_log_prob), reference.log_prob(actions))
 
 
 def test_gaussian_log_prob_and_entropy_match_torch_distributions():
     torch.manual_seed(0)
     mean, logstd, actions = torch.randn(64, 3), torch.randn(1, 3) * 0.5, torch.randn(64, 3)
-    reference = Normal(mean, logstd.exp())
-    torch.testing.assert_close(continuous.gaussian_log_prob(actions, mean, logstd), reference.log_prob(actions).sum(-1))
-    torch.testing.assert_close(continuous.gaussian_entropy(logstd).expand(64), reference.entropy().sum(-1))
+    reference, ours = Normal(mean, logstd.exp()), continuous.Gaussian(mean, logstd)
+    torch.testing.assert_close(ours.log_prob(actions), reference.log_prob(actions).sum(-1))
+    torch.testing.assert_close(ours.entropy().expand(64), reference.entropy().sum(-1))
+    other_mean = torch.randn(64, 3)
+    same_sigma = continuous.Gaussian(other_mean, logstd)  # one σ: the closed form
+    expected = kl_divergence(reference, Normal(other_mean, logstd.exp())).sum(-1)
+    torch.testing.assert_close(ours.kl(same_sigma), expected)
+    other = continuous.Gaussian(other_mean, torch.randn(1, 3) * 0.5)  # σ per branch: torch.distributions'
+    torch.testing.assert_close(ours.kl(other), kl_divergence(reference, Normal(other_mean, other.std)).sum(-1))
+    noise = torch.randn(64, 3)
+    sample, log_prob = ours.sample_log_prob(noise)
+    torch.testing.assert_close(log_prob, reference.log_prob(sample).sum(-1))
 
 
 @pytest.mark.parametrize("guidance", [1.0, 1.1, 5.0])
@@ -53,11 +67,11 @@ def test_rollout_hoisted_null_branch_equals_update_guided_policy(guidance):
         agent.null_obs.normal_()
         cagent.null_obs.normal_()
         hoisted = discrete.guide(agent.actor(obs), agent.unconditional_logits(), guidance)
-        torch.testing.assert_close(hoisted, agent.guided_logits(obs, guidance), rtol=1e-6, atol=1e-6)
+        torch.testing.assert_close(hoisted, agent.policy(obs, guidance).logits, rtol=1e-6, atol=1e-6)
         hoisted = continuous.guide(cagent.actor_mean(cobs), cagent.unconditional_mean(), guidance)
-        torch.testing.assert_close(hoisted, cagent.guided_mean(cobs, guidance), rtol=1e-6, atol=1e-6)
+        torch.testing.assert_close(hoisted, cagent.policy(cobs, guidance).mean, rtol=1e-6, atol=1e-6)
     if guidance == 1.0:  # PPO: exactly the same
-        assert torch.equal(hoisted, cagent.guided_mean(cobs, guidance))
+        assert torch.equal(hoisted, cagent.policy(cobs, guidance).mean)
 
 
 @pytest.mark.parametrize("guidance", [1.0, 1.1, 5.0])
@@ -68,7 +82,7 @@ def test_numpy_rollout_policy_matches_agent(guidance):
     agent, obs, gumbel = discrete.Agent(4, 3), torch.randn(64, 4), discrete.gumbel_noise(64, 3)
     with torch.no_grad():
         agent.null_obs.normal_()
-        logits = agent.guided_logits(obs, guidance)
+        logits = agent.policy(obs, guidance).logits
         actions, logprobs, values = discrete.RolloutPolicy(agent, guidance).act(obs.numpy(), gumbel)
         assert np.array_equal(actions, (logits + torch.from_numpy(gumbel)).argmax(-1).numpy())
         expected = logits.log_softmax(-1).gather(-1, torch.from_numpy(actions).unsqueeze(-1)).squeeze(-1)
@@ -83,11 +97,9 @@ def test_numpy_rollout_policy_matches_agent(guidance):
         policy = continuous.RolloutPolicy(cagent, guidance)
         obs = policy.observe(raw)
         actions, logprobs, values = policy.act(obs, noise)
-        mean = cagent.guided_mean(torch.from_numpy(obs), guidance)
-        torch.testing.assert_close(
-            torch.from_numpy(actions), mean + cagent.actor_logstd.exp() * torch.from_numpy(noise)
-        )
-        expected = continuous.gaussian_log_prob(torch.from_numpy(actions), mean, cagent.actor_logstd)
+        pi = cagent.policy(torch.from_numpy(obs), guidance)
+        torch.testing.assert_close(torch.from_numpy(actions), pi.sample(torch.from_numpy(noise)))
+        expected = pi.log_prob(torch.from_numpy(actions))
         torch.testing.assert_close(torch.from_numpy(logprobs), expected, rtol=1e-5, atol=1e-5)
         torch.testing.assert_close(
             torch.from_numpy(values), cagent.get_value(cagent.obs_norm(raw)), rtol=1e-5, atol=1e-6

@@ -197,9 +197,9 @@ def test_an_actor_with_layer_norm_acts_as_its_module_and_the_first_ratio_is_one(
     raw = np.random.default_rng(0).normal(size=(8, ckpt["obs_dim"]))
     with torch.no_grad():
         if kind == "discrete":
-            expected = agent.guided_logits(torch.as_tensor(raw, dtype=torch.float32), 1.3).argmax(-1).numpy()
+            expected = agent.policy(torch.as_tensor(raw, dtype=torch.float32), 1.3).mode().numpy()
         else:
-            expected = agent.guided_mean(agent.obs_norm(raw), 1.3).clamp(-0.4, 0.4).numpy()
+            expected = agent.policy(agent.obs_norm(raw), 1.3).mode().clamp(-0.4, 0.4).numpy()
     policy = sweep.GuidedPolicy(agent, ckpt)
     actions = policy.act(raw, np.full(8, 1.3), None, deterministic=True)
     np.testing.assert_allclose(actions, expected, rtol=1e-5, atol=1e-6)
@@ -246,7 +246,7 @@ def test_a_goal_null_embedding_replaces_only_the_goal_dimensions():
         policy = ppo_pgg_continuous.RolloutPolicy(agent, 1.5)
         noise = np.zeros((5, 2), np.float32)
         actions, _, _ = policy.act(obs.numpy(), noise)
-        torch.testing.assert_close(torch.from_numpy(actions), agent.guided_mean(obs, 1.5), rtol=1e-5, atol=1e-6)
+        torch.testing.assert_close(torch.from_numpy(actions), agent.policy(obs, 1.5).mean, rtol=1e-5, atol=1e-6)
     args = {**FROZEN_DEFAULTS["continuous"], "env_id": "Reacher-v4", "guidance": 1.1, "null_dims": goal}
     assert identity.variant_id(args) == "pgg_g1.1_goal"
     assert identity.variant_id({**args, "null_dims": [4, 5]}) == "pgg_g1.1_null4-5"

@@ -147,8 +147,8 @@ def guided_branch(agent, ckpt, raw, guidance, uniform_null=False):
     """The guided logits or means the sweep's GuidedPolicy acts on."""
     null = sweep.GuidedPolicy(agent, ckpt, uniform_null).null
     if ckpt["action_space"] == "continuous":
-        return agent.acting_mean(raw, guidance, **null)
-    return agent.acting_logits(raw.astype(np.float32), guidance, **null)
+        return agent.acting_policy(raw, guidance, **null).mean
+    return agent.acting_policy(raw.astype(np.float32), guidance, **null).logits
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
@@ -163,13 +163,13 @@ def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
         if kind == "discrete":
             obs = torch.as_tensor(raw, dtype=torch.float32)
             acted = ppo_pgg_discrete.guide(agent.actor(obs).numpy(), agent.unconditional_logits().numpy(), guidance)
-            optimised = agent.guided_logits(obs, guidance)
+            optimised = agent.policy(obs, guidance).logits
         else:
             obs = agent.obs_norm(raw)
             acted = ppo_pgg_continuous.guide(
                 agent.actor_mean(obs).numpy(), agent.unconditional_mean().numpy(), guidance
             )
-            optimised = agent.guided_mean(obs, guidance)
+            optimised = agent.policy(obs, guidance).mean
     np.testing.assert_array_equal(evaluated.numpy(), acted)
     torch.testing.assert_close(evaluated, optimised, rtol=1e-6, atol=1e-6)
 

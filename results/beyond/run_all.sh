@@ -9,10 +9,12 @@ cd "$(dirname "$0")/../.."
 beyond() {  # task, variants...: train and sweep, then the held-out gamma on a fresh sweep, then the report
     local env=$1; shift
     python reproduce.py --preset continuous --envs "$env" --variants "$@" --root runs/beyond \
-        --results "results/beyond/$env" --workers "${WORKERS:-2}" --compile
+        --results "results/beyond/$env" --workers "${WORKERS:-2}" --compile &&
+    cp runs/beyond/sweep/evaluated_by.csv "results/beyond/$env/evaluated_by.csv"  # which file evaluated each agent
     echo "set $env trained and swept: exit $? at $(date -u +%FT%TZ)"
     python eval_gamma_sweep.py "results/beyond/$env/agents" --eval-seed 20000 --workers "${WORKERS:-2}" \
         --output "runs/sweeps/beyond_fresh_$env" &&
+    cp "runs/sweeps/beyond_fresh_$env/evaluated_by.csv" "results/beyond/$env/heldout_evaluated_by.csv" &&
     python paper_study/heldout_gamma.py "results/beyond/$env/episodes.csv" \
         "runs/sweeps/beyond_fresh_$env/episodes.csv" --output "results/beyond/$env"
     echo "set $env held-out gamma: exit $? at $(date -u +%FT%TZ)"

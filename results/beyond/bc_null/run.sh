@@ -24,6 +24,8 @@ for eval_seed in 10000 20000; do
 done
 cp runs/sweeps/bc_null_10000/episodes.csv "$out/episodes.csv"
 cp runs/sweeps/bc_null_20000/episodes.csv "$out/heldout_fresh.csv"
+cp runs/sweeps/bc_null_10000/evaluated_by.csv "$out/evaluated_by.csv"  # which file evaluated each agent
+cp runs/sweeps/bc_null_20000/evaluated_by.csv "$out/heldout_evaluated_by.csv"
 python paper_study/heldout_gamma.py "$out/episodes.csv" "$out/heldout_fresh.csv" --null-branch bc --output "$out"
 # The same agents with their own null on the fresh episodes at every γ (the tables' fresh sweeps hold only
 # γ = 1 and the selected γ on some tasks): the other side of the report's fresh-episode tests.
@@ -31,3 +33,4 @@ python eval_gamma_sweep.py results/continuous/agents/{Hopper,Walker2d,Humanoid}-
     results/discrete/agents/{CartPole,Acrobot}-v1__{ppo,pgg_g1.1}__s{1,2,3,4,5} --steps 500000 1000000 \
     --eval-seed 20000 --workers "${WORKERS:-2}" --output runs/sweeps/bc_null_own_20000
 cp runs/sweeps/bc_null_own_20000/episodes.csv "$out/own_null_fresh.csv"
+cp runs/sweeps/bc_null_own_20000/evaluated_by.csv "$out/own_null_evaluated_by.csv"

@@ -10,9 +10,11 @@ bc_set() {  # task
     local env=$1 out=results/beyond/bc_train/$1
     python reproduce.py --preset continuous --envs "$env" --variants pgg_g1.1_bc0.1 --root runs/bc_train \
         --results "$out" --workers "${WORKERS:-2}" --compile &&
+    cp runs/bc_train/sweep/evaluated_by.csv "$out/evaluated_by.csv" &&  # which file evaluated each agent
     python eval_gamma_sweep.py "$out/agents" --eval-seed 20000 --workers "${WORKERS:-2}" \
         --output "runs/sweeps/bc_train_fresh_$env" &&
     cp "runs/sweeps/bc_train_fresh_$env/episodes.csv" "$out/heldout_fresh.csv" &&
+    cp "runs/sweeps/bc_train_fresh_$env/evaluated_by.csv" "$out/heldout_evaluated_by.csv" &&
     python paper_study/heldout_gamma.py "$out/episodes.csv" "$out/heldout_fresh.csv" --output "$out"
     echo "set $env: exit $? at $(date -u +%FT%TZ)"
 }

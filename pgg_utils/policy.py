@@ -1,0 +1,204 @@
+"""What holds for the guided policy whatever its distribution, once for both training scripts.
+
+Each script defines its action distribution once (`guided_policy`: the two branches and γ in, a distribution out);
+the loss, the rollouts' numpy copy and `Agent.act` all call it. This module holds what is not the algorithm:
+- `numpy_policy`: the definition run on numpy branches (the rollouts', `act`'s), or, where it is written for torch
+  alone, on their tensors (slower, the same definition; never a hand-written copy);
+- `path_error`, the start-up check: the rollouts, `act` and the loss agree with the definition on a probe batch at
+  a γ other than 1, and the first minibatch's ratio is 1; a fork that edits one path and not the others stops in
+  one line naming it;
+- the null branch of an actor whose training mode couples rows or moves statistics (BatchNorm) or draws noise
+  (Dropout): computed on its own, in eval mode (`branch_pass`, `null_pass`), so it needs no batch and moves nothing;
+- `missing_methods`: the methods of `Agent` that the rest of the project calls."""
+
+import sys
+from contextlib import contextmanager, nullcontext
+
+import numpy as np
+import torch
+from torch import nn
+
+# The γ of the start-up probe: not 1, where the null branch drops out of the guided policy.
+PROBE_GUIDANCE = 1.3
+PROBE_ROWS = 8
+PROBE_RTOL, PROBE_ATOL = 1e-4, 1e-5
+# The first minibatch's approx_kl, mean((r - 1) - log r) >= 0 per row, above which the ratio is not 1.
+PROBE_MAX_KL = 1e-7
+# Layers whose training mode mixes rows, moves statistics or draws noise.
+MODE_DEPENDENT = (nn.modules.batchnorm._BatchNorm, nn.modules.dropout._DropoutNd)
+
+
+def refuse(error: str) -> None:
+    """Stops training before it starts: one line, exit 2."""
+    print(f"error: {error}", file=sys.stderr)
+    sys.exit(2)
+
+
+def mode_dependent(module: nn.Module) -> bool:
+    return any(isinstance(layer, MODE_DEPENDENT) for layer in module.modules())
+
+
+@contextmanager
+def eval_mode(module: nn.Module):
+    """`module` in eval mode inside the block, each submodule's own mode restored after it."""
+    modes = [(layer, layer.training) for layer in module.modules()]
+    module.eval()
+    try:
+        yield module
+    finally:
+        for layer, training in modes:
+            layer.training = training
+
+
+def frozen(network: nn.Module):
+    """eval_mode for a network whose training mode couples rows, moves statistics or draws noise; for any other,
+    nothing (its forward is the same in both modes, and a compiled loss then sees no mode switch)."""
+    return eval_mode(network) if mode_dependent(network) else nullcontext(network)
+
+
+def null_pass(network: nn.Module, null_in: torch.Tensor) -> torch.Tensor:
+    """`network` on the null input alone, frozen: a BatchNorm takes one row and keeps its statistics."""
+    with frozen(network):
+        return network(null_in)
+
+
+def branch_pass(network: nn.Module, obs: torch.Tensor, null_in: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(network(obs), network(null_in)). One pass where every layer computes each row alone (a separate one-row pass
+    costs as much as the batch at this size, and can round differently); where a layer's training mode couples the
+    rows or draws noise, the null input runs on its own in eval mode (`null_pass`)."""
+    if mode_dependent(network):
+        return network(obs), null_pass(network, null_in)
+    return network(torch.cat([obs, null_in])).split([len(obs), len(null_in)])
+
+
+def missing_methods(agent, required: dict[str, str]) -> str | None:
+    """One line naming the first method of `required` ({name: who calls it}) that `agent` lacks, or None."""
+    for name, caller in required.items():
+        if not callable(getattr(agent, name, None)):
+            return f"{type(agent).__name__} has no method {name}, which {caller} calls (see the Agent's docstring)"
+    return None
+
+
+def as_tensor(x):
+    return x if torch.is_tensor(x) else torch.from_numpy(np.ascontiguousarray(x))
+
+
+def as_array(x) -> np.ndarray:
+    return x.detach().numpy() if torch.is_tensor(x) else np.asarray(x)
+
+
+class TorchDefined:
+    """A distribution that the definition computed in torch, used by numpy callers: noise and actions go in as
+    numpy arrays, samples and log-probabilities come out as numpy arrays."""
+
+    def __init__(self, distribution):
+        self.distribution = distribution
+
+    def sample(self, noise):
+        return as_array(self.distribution.sample(as_tensor(noise)))
+
+    def mode(self):
+        return as_array(self.distribution.mode())
+
+    def log_prob(self, actions):
+        return as_array(self.distribution.log_prob(as_tensor(actions)))
+
+    def sample_log_prob(self, noise):
+        actions, log_probs = self.distribution.sample_log_prob(as_tensor(noise))
+        return as_array(actions), as_array(log_probs)
+
+
+def numpy_policy(definition, cond, null, guidance):
+    """`definition(cond, null, guidance)` on numpy branches: computed in numpy where the definition is written with
+    operations numpy has (the scripts' own), else on the branches' tensors, wrapped for numpy callers (TorchDefined).
+    `guidance` a number or one per row."""
+    try:
+        return definition(cond, null, guidance)
+    except (TypeError, AttributeError):  # a torch function given an array, or a tensor method asked of one
+        column = np.asarray(guidance, dtype=np.float32)
+        weight = float(column) if column.ndim == 0 else torch.from_numpy(column[:, None])
+        return TorchDefined(definition(cond.as_torch(), null.as_torch(), weight))
+
+
+def close(a, b) -> bool:
+    a, b = as_array(a), as_array(b)
+    if a.shape != b.shape:
+        return False
+    if np.issubdtype(a.dtype, np.integer) or np.issubdtype(b.dtype, np.integer):
+        return np.array_equal(a, b)
+    return np.allclose(a, b, rtol=PROBE_RTOL, atol=PROBE_ATOL)
+
+
+def path_error(script, agent, args, raw_obs: np.ndarray, normalise, noise: np.ndarray) -> str | None:
+    """The start-up check of a training script's policy paths on a probe batch (`raw_obs`, as the task gives it;
+    `normalise` turns it into the actor's input; `noise` the rollouts' kind, one row per observation): one line
+    naming the first path that disagrees with the definition (`agent.policy`, which calls `guided_policy`), or None.
+    At γ = PROBE_GUIDANCE and at 1 (the loss then takes None, PPO's own pass):
+    - the rollouts (`RolloutPolicy.act`) sample what the definition samples with the same noise, with its log-probs;
+    - the loss (`minibatch_loss`) gives the rollout's actions the rollout's log-probs: the first ratio is 1;
+    - `Agent.act` acts as the definition does, deterministic and sampled, one guidance per row as the sweep asks.
+    Runs in eval mode and restores torch's RNG state: nothing trained, moved or drawn."""
+    if error := missing_methods(agent, script.AGENT_METHODS):
+        return error
+    rng_state = torch.get_rng_state()
+    try:
+        with eval_mode(agent):
+            for guidance, loss_guidance in ((PROBE_GUIDANCE, PROBE_GUIDANCE), (1.0, None)):
+                if error := probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidance):
+                    return error
+    finally:
+        torch.set_rng_state(rng_state)
+    return None
+
+
+def probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidance) -> str | None:
+    obs = normalise(raw_obs)
+    at = f"at guidance {guidance:g} on a probe batch"
+    with torch.no_grad():
+        defined = agent.policy(torch.from_numpy(obs), loss_guidance)
+        actions, log_probs, _ = script.RolloutPolicy(agent, guidance).act(obs, noise)
+        expected = defined.sample(torch.from_numpy(noise))
+        if not close(actions, expected):
+            return f"the rollouts' actions (RolloutPolicy.act) differ from guided_policy's samples {at}"
+        if not close(log_probs, defined.log_prob(torch.from_numpy(actions))):
+            return f"the rollouts' log-probabilities (RolloutPolicy.act) differ from guided_policy's {at}"
+    rows = len(obs)
+    batch = {"obs": torch.from_numpy(obs), "actions": torch.from_numpy(actions),
+             "logprobs": torch.from_numpy(np.asarray(log_probs, np.float32)), "advantages": torch.ones(rows),
+             "returns": torch.zeros(rows), "values": torch.zeros(rows)}  # fmt: skip
+    _, stats = script.minibatch_loss(agent, batch, torch.arange(rows), None, loss_guidance, args)
+    if not stats["losses/approx_kl"].item() <= PROBE_MAX_KL:
+        return (f"minibatch_loss's log-probabilities of the rollouts' actions differ from the rollouts' own {at} "
+                f"(the first ratio is not 1: approx_kl {stats['losses/approx_kl'].item():.3g})")  # fmt: skip
+    per_row = np.full(rows, guidance)
+    bounds = getattr(agent, "action_bounds", None)
+    bounded = (lambda a: np.clip(as_array(a), *bounds)) if bounds is not None else as_array
+    with torch.no_grad():
+        if not close(agent.act(raw_obs, per_row, deterministic=True), bounded(defined.mode())):
+            return f"Agent.act's deterministic actions differ from guided_policy's mode {at}"
+        if not close(agent.act(raw_obs, per_row, noise=noise), bounded(expected)):
+            return f"Agent.act's sampled actions differ from guided_policy's samples with the same noise {at}"
+    return None
+
+
+def probe_observations(observation_space, rows: int = PROBE_ROWS) -> np.ndarray:
+    """A probe batch of observations from a fixed generator of its own (no global RNG is drawn): standard normal,
+    within the space's bounds where it has them."""
+    shape = (rows, *observation_space.shape)
+    raw = np.random.default_rng(0).standard_normal(shape)
+    low, high = getattr(observation_space, "low", None), getattr(observation_space, "high", None)
+    if low is not None:
+        raw = np.clip(raw, low, high)
+    return raw
+
+
+def observation_error(obs: np.ndarray, shape: tuple) -> str | None:
+    """What `act` says of an observation (one, or a batch of them) that is not of the agent's `shape`, or None."""
+    shape = tuple(shape)
+    if obs.shape[-len(shape) :] != shape or obs.ndim not in (len(shape), len(shape) + 1):
+        return f"the observation has shape {obs.shape}; the agent takes {shape}, or a batch of them (n, {', '.join(map(str, shape))})"
+    return None
+
+
+def guidance_none_error(guidance) -> str | None:
+    return "guidance must be a number in [0, 1000], got None" if guidance is None else None
