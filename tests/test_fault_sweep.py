@@ -424,7 +424,7 @@ import numpy as np
 
 class Reach(gym.Env):
     observation_space = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
-    action_space = gym.spaces.Box(-1.0, 1.0, (2, 2), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, SHAPE, np.float32)
 
     def reset(self, seed=None, options=None):
         super().reset(seed=seed)
@@ -441,18 +441,19 @@ gym.register("BoxReach-v0", entry_point=Reach, max_episode_steps=20)
 
 
 def test_a_box_action_of_two_dimensions_is_refused_in_one_line_not_broadcast(tmp_path, monkeypatch, capsys):
-    """A Box(2, 2) action: the sweep acts with flat vectors, so it refuses the checkpoint in one line (the
-    policy helper's training flattens or refuses such a space; a checkpoint trained before does neither)."""
-    (tmp_path / "tasks").mkdir()
-    (tmp_path / "tasks" / "box_reach_task.py").write_text(BOX_TASK)
-    monkeypatch.syspath_prepend(str(tmp_path / "tasks"))
-    env_id = "box_reach_task:BoxReach-v0"
-    try:
-        run_dir = train(ppo_pgg_continuous, ppo_pgg_continuous.Args(
-            env_id=env_id, output_dir=str(tmp_path / "runs"), total_timesteps=256, num_steps=128, num_minibatches=2,
-            update_epochs=1, checkpoint_interval=256,
-        ))  # fmt: skip
-    except (ValueError, SystemExit) as e:  # training that refuses the space: nothing for the sweep to refuse
-        pytest.skip(f"training refuses a Box(2, 2) action ({e})")
+    """A task whose Box action became (2, 2) after training on a flat Box(4): the sweep acts with flat vectors,
+    so it refuses the checkpoint in one line, never a broadcast error (training refuses such a space itself)."""
+    module = tmp_path / "tasks" / "box_reach_task.py"
+    module.parent.mkdir()
+    module.write_text("SHAPE = (4,)\n" + BOX_TASK)
+    monkeypatch.syspath_prepend(str(module.parent))
+    run_dir = train(ppo_pgg_continuous, ppo_pgg_continuous.Args(
+        env_id="box_reach_task:BoxReach-v0", output_dir=str(tmp_path / "runs"), total_timesteps=256, num_steps=128,
+        num_minibatches=2, update_epochs=1, checkpoint_interval=256,
+    ))  # fmt: skip
+    module.write_text("SHAPE = (2, 2)\n" + BOX_TASK)
+    sys.modules.pop("box_reach_task", None)
+    gym.registry.pop("box_reach_task:BoxReach-v0", None)
+    gym.registry.pop("BoxReach-v0", None)
     reason = the_one_skip(*swept_beside_a_good_checkpoint(run_dir, tmp_path, capsys), run_dir)
     assert "actions are a Box of shape (2, 2)" in reason and "broadcast" not in reason, reason
