@@ -198,6 +198,11 @@ class GuidedPolicy:
             else:
                 self.null = {"mean_null": agent.unconditional_mean().numpy()}
 
+    def reset(self) -> None:
+        """Begins the episodes of a cell, or one episode: a recurrent actor starts from a fresh state."""
+        if callable(reset := getattr(self.agent, "reset", None)):  # agents before Agent.reset have no state
+            reset()
+
     def act(self, raw_obs: np.ndarray, guidance: np.ndarray, noise: np.ndarray, deterministic: bool) -> np.ndarray:
         """Actions for a batch, one guidance strength per row; `noise` holds one row of episode_noise
         per observation, used unless deterministic."""
@@ -326,6 +331,7 @@ def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_
         noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)], 1)
         guidance = np.full(episodes, float(gamma))
         obs = np.stack([reset_task(env, eval_seed + k, k, gamma) for k, env in enumerate(envs)])
+        policy.reset()
         recorded = records_episodes(envs[0])
         returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
         running = np.ones(episodes, dtype=bool)
@@ -379,6 +385,7 @@ def play_episode(env, policy: GuidedPolicy, ckpt, gamma: float, eval_seed: int, 
     horizon, action_size = horizon_and_action_size(env, ckpt)
     noise = episode_noise(policy.kind, eval_seed, episode, horizon, action_size)
     obs = reset_task(env, eval_seed + episode, episode, gamma)
+    policy.reset()
     recorded = records_episodes(env)
     total, t, done = 0.0, 0, False
     while True:

@@ -94,6 +94,11 @@ class TorchDefined:
     def __init__(self, distribution):
         self.distribution = distribution
 
+    def __getattr__(self, name: str):  # its parameters (logits, mean), as arrays
+        if name == "distribution":  # not yet set (a copy): no recursion
+            raise AttributeError(name)
+        return as_array(getattr(self.distribution, name))
+
     def sample(self, noise):
         return as_array(self.distribution.sample(as_tensor(noise)))
 

@@ -15,6 +15,7 @@ import torch
 from conftest import ROOT, SCRIPTS, one_line_error, small_args, train
 from torch import nn
 
+import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import policy, runs, scripts
@@ -312,3 +313,48 @@ def test_the_start_up_check_draws_nothing_and_moves_nothing(tmp_path):
     assert policy.path_error(ppo_pgg_continuous, agent, args, raw, agent.obs_norm.normalise, noise) is None
     assert torch.equal(torch.get_rng_state(), rng) and agent.training
     assert all(torch.equal(value, agent.state_dict()[name]) for name, value in state.items())
+
+
+class CountingActor(ppo_pgg_discrete.Agent):
+    """An actor with a hidden state: the steps since its reset, which it acts on."""
+
+    def __init__(self):
+        super().__init__(4, 2)
+        self.steps, self.first_steps = 0, []
+
+    def reset(self):
+        self.steps = 0
+
+    def act(self, obs, guidance=1.0, deterministic=False, noise=None, logits_null=None):
+        self.steps += 1
+        if self.steps == 1 or not self.first_steps:
+            self.first_steps.append(self.steps)
+        return np.full(len(obs), int(self.steps % 7 < 3))
+
+
+def test_every_sweep_episode_starts_the_actor_from_a_fresh_state():
+    agent = CountingActor()
+    ckpt = {"action_space": "discrete", "env_id": "CartPole-v1", "n_actions": 2}
+    guided = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
+    env = guided.make_env()
+    lengths = [sweep.play_episode(env, guided, ckpt, 1.0, 10_000, episode, True)[1] for episode in range(3)]
+    sweep.evaluate_cell(guided, ckpt, 1.0, 2, 10_000, True)
+    assert min(lengths) > 1 and agent.first_steps == [1, 1, 1, 1]  # the sequential path, then the cell's start
+
+
+def test_a_definition_written_for_torch_alone_acts_through_torch(monkeypatch):
+    """guided_policy with torch functions only: the numpy paths (rollouts, act, bc_null) compute it on tensors."""
+    module = ppo_pgg_discrete
+    torch.manual_seed(0)
+    agent, obs = module.Agent(4, 3), np.random.default_rng(0).normal(size=(5, 4)).astype(np.float32)
+    with torch.no_grad():
+        agent.null_obs.normal_()
+    expected = agent.act(obs, 1.7, deterministic=True)
+    monkeypatch.setattr(module, "guided_policy", lambda c, n, g: module.Categorical(torch.lerp(n.logits, c.logits, g)))
+    pi = agent.acting_policy(obs, 1.7)
+    assert isinstance(pi, policy.TorchDefined) and isinstance(pi.logits, np.ndarray)
+    np.testing.assert_array_equal(agent.act(obs, np.full(5, 1.7), deterministic=True), expected)
+    assert agent.act(obs, 1.7).shape == (5,)  # its own noise, shaped by the logits
+    actions, log_probs, _ = module.RolloutPolicy(agent, 1.7).act(obs, module.gumbel_noise(5, 3))
+    expected_log_probs = agent.policy(torch.from_numpy(obs), 1.7).log_prob(torch.from_numpy(actions))
+    np.testing.assert_allclose(log_probs, expected_log_probs.detach().numpy(), rtol=1e-5, atol=1e-6)
