@@ -17,7 +17,7 @@ from conftest import ROOT
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_discrete
-from pgg_utils import files, scripts
+from pgg_utils import episodes, files, scripts
 
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
 LOOP_LINE = "actions = policy.act(obs, guidance, noise[t], deterministic)"
@@ -74,6 +74,7 @@ def test_a_per_episode_column_added_in_a_sweep_copy_reaches_episodes_csv(tmp_pat
     assert list(rows[0]) == [*sweep.EPISODE_COLUMNS, "final_position"] and len(rows) == 12
     positions = [float(r["final_position"]) for r in rows]  # the cart's position when its episode ended
     assert all(np.isfinite(positions)) and len(set(positions)) > 1
+    assert len(episodes.read_episodes([output])) == 12  # the one reader of episodes.csv takes it, column and all
     measuring.sweep(sweep_args(tmp_path / "out"))  # its cells, whole with their added column, are reused
     assert "2 already done" in capsys.readouterr().err
     sweep.sweep(sweep_args(tmp_path / "out"))
