@@ -1096,11 +1096,11 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
     record(values_out, env, "", "command", "whole", float(not gaps))
     if gaps:
         lines += ["", (f"**Partial set:** {'; '.join(gaps)}. The tables below hold what there is, at {step_label(last)}; "
-                       "they are not the set's result, and a verdict waits for the whole set."), ""]  # fmt: skip
+                       "they are not the set's result, and a verdict waits for the whole set.")]  # fmt: skip
     if 1.0 not in gammas or not in_range:
         return [*lines, "", "No γ = 1 cell or no command inside the training range: nothing to compare.", ""]
     seeds = len({s for (v, s, g, c) in cells})
-    lines += ["", (f"At {step_label(last)}: {len(variants)} variants, up to {seeds} seeds, eval γ "
+    lines += ["", (f"At {step_label(last)}: {len(variants)} variants, seeds up to {seeds}, eval γ "
                    f"{', '.join(f'{g:g}' for g in gammas)}; commands inside the training range "
                    f"{', '.join(f'{c:g}' for c in in_range)}, above it {', '.join(f'{c:g}' for c in above) or 'none'}, "
                    f"below it {', '.join(f'{c:g}' for c in below) or 'none'} (m/s); each seed's value is the mean over "

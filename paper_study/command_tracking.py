@@ -76,6 +76,8 @@ def play_cell(agent, make_env, gamma: float, command: float, episodes: int, eval
                      axis=1)  # fmt: skip
     obs = np.stack([env.reset(seed=eval_seed + k, options={"command": command})[0] for k, env in enumerate(envs)])
     guidance = np.full(episodes, float(gamma))
+    if callable(reset := getattr(agent, "reset", None)):  # a recurrent actor starts each cell fresh, as in the sweep
+        reset()
     returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
     velocity_sum, error_sum = np.zeros(episodes), np.zeros(episodes)
     running, t = np.ones(episodes, dtype=bool), 0

@@ -214,6 +214,7 @@ def beyond_rows(env, variant, returns_by_step, gammas=(1.0, 1.5)):
             for seed, value in enumerate(per_seed, start=1):
                 for episode in range(2):
                     rows.append({"env_id": env, "variant": variant, "config": f"{variant} mujoco=2.3.7", "seed": seed,
+                                 "train_guidance": 1.1 if variant != "ppo" else 1.0, "cond_dropout": 0.0,
                                  "step": step, "eval_guidance": gamma, "policy": "sample", "null_branch": "learned",
                                  "return": value / gamma ** 2 + episode})  # fmt: skip
     return rows
