@@ -73,9 +73,13 @@ class RunningObsNorm(nn.Module):
     def normalise(self, raw_obs) -> np.ndarray:
         return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
 
-    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
-        """Adds `raw_obs` to the statistics and returns it normalised by them (as RolloutPolicy.observe)."""
+    def update(self, raw_obs: np.ndarray) -> None:
+        """Adds the rows of `raw_obs` to the statistics, in place."""
         update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), raw_obs)
+
+    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
+        """Adds `raw_obs` to the statistics and returns it normalised by them."""
+        self.update(raw_obs)
         return self.normalise(raw_obs)
 
     def forward(self, raw_obs) -> torch.Tensor:
