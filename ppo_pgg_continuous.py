@@ -40,7 +40,7 @@ from pgg_utils.arguments import RunArgs
 from pgg_utils.distributions import Gaussian, guide  # PGG: guide, the mix of the branches' parameters
 from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
-from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm
+from pgg_utils.normalisation import NormalizeClipReward, ObservationStatistics, RunningObsNorm
 from pgg_utils.policy import (
     branch_pass,
     eval_mode,
@@ -288,13 +288,13 @@ def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  
 
 
 class RolloutPolicy:
-    """pi_hat and the critic for acting during one rollout, on views of the agent's weights (fixed until
-    the update): the networks' numpy copies and
-    guided_policy on their outputs (pgg_utils/policy.py). It caches pi(.|null) and σ: build one per rollout."""
+    """pi_hat and the critic for acting during one rollout, on views of the agent's weights (fixed until the update)
+    and observation statistics: the networks' numpy copies and guided_policy on their outputs (pgg_utils/policy.py).
+    It caches pi(.|null) and σ: build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor_mean), numpy_network(agent.critic)
-        self.obs_norm = agent.obs_norm  # the rollout's observations update its statistics, in place
+        self.obs_norm = ObservationStatistics(agent.obs_norm)  # the rollout's observations update it in place
         self.guidance = guidance  # PGG
         self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
