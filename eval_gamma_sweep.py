@@ -59,7 +59,7 @@ import os
 import signal
 import sys
 import time
-from collections import defaultdict
+from collections import Counter
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
@@ -86,7 +86,7 @@ from pgg_utils.files import (
     write_record,
 )
 from pgg_utils.identity import configuration, configuration_fields
-from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
+from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95, seed_means
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
 from pgg_utils.video import labelled, write_video
@@ -355,19 +355,17 @@ def summarise(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_0
     per-seed mean episodic return. A seed must be one run: InputError where two runs (the `run`
     column) give the same seed of one group, or one run gives the same episode twice."""
     check_one_run_per_seed(rows, configuration, cell_of)
-    per_seed = defaultdict(lambda: defaultdict(list))
-    for row in rows:
-        key = tuple(configuration(row)[2] if c == "config" else str(row[c]) for c in GROUP_COLUMNS)
-        per_seed[key][str(row["seed"])].append(float(row["return"]))
+    group_of = lambda row: tuple(configuration(row)[2] if c == "config" else str(row[c]) for c in GROUP_COLUMNS)
+    per_seed, episodes = seed_means(rows, group_of), Counter(map(group_of, rows))
     out = []
     for key in sorted(per_seed, key=lambda k: (k[0], k[1], k[2], int(k[5]), float(k[6]), k[7], k[8])):
-        seed_means = [float(np.mean(v)) for _, v in sorted(per_seed[key].items())]
-        mean, half, low, high = mean_ci95(seed_means, method, bootstrap_samples)
+        means = list(per_seed[key].values())
+        mean, half, low, high = mean_ci95(means, method, bootstrap_samples)
         out.append({
             **dict(zip(GROUP_COLUMNS, key)),
-            "n_seeds": len(seed_means), "n_episodes": sum(len(v) for v in per_seed[key].values()),
+            "n_seeds": len(means), "n_episodes": episodes[key],
             "mean": round(mean, 4), "ci95": round(half, 4), "ci_low": round(low, 4), "ci_high": round(high, 4),
-            "ci_method": method, "seed_means": ";".join(f"{m:.4f}" for m in seed_means),
+            "ci_method": method, "seed_means": ";".join(f"{m:.4f}" for m in means),
         })  # fmt: skip
     return out
 

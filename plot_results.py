@@ -36,12 +36,17 @@ Writes into --output (and prints each path):
                                 references (0 = the paper's PPO at its first step, 1 = at its last),
                                 with stratified-bootstrap 95% CIs (scipy.stats.bootstrap);
                                 aggregate_iqm_<kind>.png/pdf draws the last step's as intervals
+  performance_profile_<kind>.png/pdf  rliable's performance profile of the same normalised scores at
+                                the last step: per variant and eval γ the fraction of (task, seed)
+                                scores above each τ, with a stratified-bootstrap 95% CI
   compare_paper.md / .csv       (--compare-paper) the agreement report: per paper cell Welch's t test
                                 on the two summaries, Holm-corrected over the cells of one table,
                                 effect sizes, CI overlap and the gap its test detects 80% of the time;
                                 per env a sign test and the median relative gap with a bootstrap CI
                                 over our seeds; CleanRL's published PPO as a second reference; the
-                                simulated null rates of each criterion
+                                simulated null rates of each criterion. Of the paper's configurations
+                                only: a fork (`script=` in its label) or any other training argument
+                                is left out and named, in the report and a printed note
   compare_paper_tasks.csv       (--compare-paper) the per-env lines of the report's headline
   provenance.md                 (--provenance) each input CSV with the commits, MuJoCo and machine
                                 behind it, and which cells come from it
@@ -49,7 +54,8 @@ Writes into --output (and prints each path):
                                 --uniform-null): the modes side by side, cell by cell
   outputs.txt                   the files above that this run wrote. A rerun into the same folder
                                 removes those the previous run listed and it did not write again (a
-                                previous grid's figures), and no other file
+                                previous grid's figures; learning curves a rerun without --runs does
+                                not draw), and no other file
 
 --output is locked while it is written (a second plot_results.py or reproduce.py into it is refused).
 Partial inputs are never tabled as whole: an episodes.csv that differs from its sweep's written.csv
@@ -90,32 +96,34 @@ from paper_study.agreement import (
     task_summaries,
 )
 from paper_study.figures import cell_index, ordered_series
-from paper_study.paper import PAPER_ENVS, action_kind, paper_name, series_name, variant_rank
+from paper_study.paper import PAPER_ENVS, is_paper_configuration, paper_name, paper_rows, series_name, variant_rank
+from paper_study.stats import performance_profile
+from paper_study.summary import (
+    ROOT,
+    config_labels,
+    provenance_entry,
+    read_episodes,
+    read_provenance,
+    seeds_short,
+    short_cells_note,
+    summarise,
+    table_csv,
+)
 from pgg_utils import files
+from pgg_utils.episodes import episodes_csv as sweep_csv
+from pgg_utils.episodes import select_mode
 from pgg_utils.files import (
     MANIFEST,
     InputError,
     LockedError,
-    check_record,
-    read_csv,
-    read_csv_columns,
     read_manifest,
     remove_stale,
     write_atomic,
     write_manifest,
 )
-from pgg_utils.identity import configuration, configuration_fields, is_mujoco
-from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95
+from pgg_utils.identity import configuration_fields
 
-ROOT = Path(__file__).resolve().parent
-REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
-                    "null_branch", "seed", "return"}  # fmt: skip
-KINDS = ("discrete", "continuous")
-NULL_BRANCHES = (
-    "learned",
-    "uniform",
-    "bc",
-)  # the sweep's null_branch column  # the paper's two tables, by action space
+NULL_BRANCHES = ("learned", "uniform", "bc")  # the sweep's null_branch column
 # The eval γ a paper figure draws where it is fewer than its table's (its continuous dropout figure: 1.0-1.2).
 # Our figure of that variant draws the same range; the other swept γ go to fig_<kind>_<variant>_beyond_paper.
 PAPER_FIGURE_GAMMAS = {("continuous", "pgg_drop0.1"): (1.0, 1.2)}
@@ -146,11 +154,6 @@ USAGE = ("usage: plot_results.py SWEEP [SWEEP ...] [--output DIR] [--runs RUN ..
 
 
 # --- arguments, checked up front ------------------------------------------------------------------
-
-
-def sweep_csv(raw: str) -> Path:
-    path = Path(raw)
-    return path / "episodes.csv" if path.is_dir() else path
 
 
 def run_args_files(run_paths) -> list[Path]:
@@ -189,221 +192,6 @@ def check_writable(output: Path) -> None:
     if output.exists() and not output.is_dir():
         raise InputError(f"--output {output} exists and is not a directory")
     files.check_writable(output)
-
-
-# --- reading, configurations ----------------------------------------------------------------------
-
-
-def read_episodes(paths) -> list[dict]:
-    """Every episode row of the given sweeps, each with its `config` (the variant where the CSV has no
-    such column), `kind` (the table its env belongs to) and `_source` (the CSV it came from)."""
-    rows = []
-    for raw in paths:
-        path = sweep_csv(raw)
-        if not path.exists():
-            raise InputError(f"no sweep CSV at {path}")
-        columns, of_file = read_csv_columns(path)
-        if columns is None:
-            raise InputError(f"{path} is empty")
-        missing = REQUIRED_COLUMNS - set(columns)
-        if missing:
-            raise InputError(f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?")
-        check_record(path, len(of_file))
-        for line, row in enumerate(of_file, start=2):
-            check_values(row, f"{path}, line {line}")
-            row["config"] = row.get("config") or row["variant"]
-            row["kind"] = kind_of(row, path)
-            row["_source"] = str(path)
-        check_whole_cells(of_file, path)
-        rows.extend(of_file)
-    check_one_kind(rows)
-    check_not_pooled(rows)
-    return rows
-
-
-def check_whole_cells(rows: list[dict], path: Path) -> None:
-    """A sweep evaluates every cell of one CSV (run, step, γ, evaluation mode) for the same number of
-    episodes: InputError where a cell holds fewer than the others, the mark of a cut or edited file."""
-    counts = defaultdict(int)
-    for row in rows:
-        counts[(*configuration(row), row["seed"], *cell_of(row))] += 1
-    most = max(counts.values(), default=0)
-    short = {cell: n for cell, n in counts.items() if n < most}
-    if short:
-        (env, _, config, _, _, seed, step, gamma, *_), n = next(iter(short.items()))
-        raise InputError(f"{path}: {len(short)} cell(s) hold fewer episodes than the other cells' {most}, e.g. {env} "
-                         f"{config} seed {seed} at step {step}, eval γ {gamma}: {n} (a cut or edited file); rerun the "
-                         "sweep to write it whole")  # fmt: skip
-
-
-NUMBER_COLUMNS = ("return", "train_guidance", "cond_dropout", "eval_guidance")
-INTEGER_COLUMNS = ("step", "seed")
-
-
-def check_values(row: dict, where: str) -> None:
-    """InputError with one line for a value no sweep writes (an edited episodes.csv): a number column
-    that is not a finite number, a step or seed that is not an integer, a return outside what its task
-    allows (figures.RETURN_RANGE)."""
-    for column in (*NUMBER_COLUMNS, *INTEGER_COLUMNS):
-        value = row[column]
-        try:
-            number = int(value) if column in INTEGER_COLUMNS else float(value)
-        except (TypeError, ValueError):
-            raise InputError(
-                f"{where}: {column} {value!r} is not a{'n integer' if column in INTEGER_COLUMNS else ' number'}"
-            ) from None
-        if not math.isfinite(number):
-            raise InputError(f"{where}: {column} {value!r} is not finite")
-    low, high = figures.RETURN_RANGE.get(row["env_id"], (-math.inf, math.inf))
-    if not low <= float(row["return"]) <= high:
-        raise InputError(f"{where}: return {row['return']} is outside what {row['env_id']} allows, [{low:g}, {high:g}]")
-
-
-def kind_of(row: dict, path: Path) -> str:
-    """The table a row belongs to, discrete or continuous: the action space its sweep recorded, else
-    the task's own (paper_study.paper.action_kind), never a guess from the env's name."""
-    recorded = row.get("action_space")
-    if recorded:
-        if recorded not in KINDS:
-            raise InputError(f"{path}: action_space {recorded!r} of {row['env_id']} is neither discrete nor continuous")
-        return recorded
-    try:
-        return action_kind(row["env_id"])
-    except ValueError as e:
-        raise InputError(f"{path} records no action_space for {row['env_id']}, and {e}") from None
-
-
-def check_one_kind(rows: list[dict]) -> None:
-    """An env belongs to one table: CSVs that disagree on its action space cannot both be right."""
-    first = {}  # env -> (kind, source)
-    for row in rows:
-        kind, source = first.setdefault(row["env_id"], (row["kind"], row["_source"]))
-        if kind != row["kind"]:
-            raise InputError(
-                f"{row['env_id']} has {kind} actions in {source} and {row['kind']} actions in {row['_source']}"
-            )
-
-
-def check_not_pooled(rows: list[dict]) -> None:
-    """A cell's seeds must be distinct runs of one configuration, and each episode must be counted once."""
-    check_one_run_per_seed(rows, configuration, cell_of, source=lambda row: row["_source"])
-
-
-def select_mode(rows: list[dict], policy: str, null_branch: str) -> list[dict]:
-    selected = [r for r in rows if r["policy"] == policy and r["null_branch"] == null_branch]
-    if not selected:
-        raise InputError(f"no episodes with policy={policy} and null_branch={null_branch}")
-    return selected
-
-
-def config_tokens(config: str) -> dict:
-    """`ppo learning_rate=0.002 mujoco=2.3.7` -> {"learning_rate": "0.002", "mujoco": "2.3.7"}."""
-    return dict(token.split("=", 1) for token in config.split()[1:] if "=" in token)
-
-
-def config_labels(pairs) -> dict:
-    """{(env, variant, config, guidance, dropout, source-set)} -> the label that tells configurations of
-    one env and variant apart: "" where the env and variant have one, else the arguments whose values
-    differ (`key=default` where a config does not set one; guidance and dropout exactly), with the
-    source folder added where that is still ambiguous."""
-    groups = defaultdict(dict)
-    for env, variant, config, guidance, dropout, sources in pairs:
-        groups[(env, variant)][(config, guidance, dropout)] = sources
-    labels = {}
-    for (env, variant), configs in groups.items():
-        if len(configs) == 1:
-            labels.update({(env, variant, *c): "" for c in configs})
-            continue
-        tokens = {c: config_tokens(c[0]) | {"guidance": repr(c[1]), "cond_dropout": repr(c[2])} for c in configs}
-        keys = sorted({k for t in tokens.values() for k in t})
-        differing = [k for k in keys if len({t.get(k) for t in tokens.values()}) > 1]
-        named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in differing) for c in configs}
-        for c in configs:
-            if not named[c] or list(named.values()).count(named[c]) > 1:
-                folders = sorted({Path(s).parent.name or s for s in configs[c]})
-                named[c] = " ".join(filter(None, [named[c], f"from {', '.join(folders)}"]))
-            labels[(env, variant, *c)] = named[c]
-    return labels
-
-
-def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
-    """One row per (configuration, step, γ, policy, null branch): statistics over seeds of the per-seed
-    mean episodic return, with the configuration's label (`series`), its table (`kind`) and MuJoCo
-    version."""
-    per_seed = defaultdict(lambda: defaultdict(list))
-    sources = defaultdict(set)
-    kinds = {}
-    for row in rows:
-        config = configuration(row)
-        key = (*config, int(row["step"]), float(row["eval_guidance"]), row["policy"], row["null_branch"])
-        per_seed[key][int(row["seed"])].append(float(row["return"]))
-        sources[config].add(row["_source"])
-        kinds[row["env_id"]] = row["kind"]
-    labels = config_labels((*c, frozenset(s)) for c, s in sources.items())
-    out = []
-    for key in sorted(per_seed, key=lambda k: (k[0], variant_rank(k[1]), *k[1:])):
-        env, variant, config, guidance, dropout, step, gamma, policy, null_branch = key
-        seed_means = [float(np.mean(v)) for _, v in sorted(per_seed[key].items())]
-        mean, half, _, _ = mean_ci95(seed_means)
-        out.append({
-            "env_id": env, "variant": variant, "config": config, "train_guidance": guidance, "cond_dropout": dropout,
-            "kind": kinds[env], "series": labels[key[:5]],
-            "step": step, "eval_guidance": gamma, "policy": policy, "null_branch": null_branch,
-            "n_seeds": len(seed_means), "n_episodes": sum(len(v) for v in per_seed[key].values()),
-            "mean": mean, "ci95": half, "sd": float(np.std(seed_means, ddof=1)) if len(seed_means) > 1 else math.nan,
-            "seed_means": ";".join(f"{m:.4f}" for m in seed_means), "seeds": sorted(per_seed[key]),
-            "mujoco": mujoco_of(env, config, sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
-            **code_of(sources[key[:5]], provenance),
-        })  # fmt: skip
-    # A cell's siblings are the other cells of its configuration and evaluation mode: a run missing from
-    # one (a cut file, a run stopped before its last checkpoint) leaves it with fewer seeds, which it says.
-    most = defaultdict(int)
-    for r in out:
-        most[sibling_key(r)] = max(most[sibling_key(r)], r["n_seeds"])
-    for r in out:
-        r["of_seeds"] = most[sibling_key(r)]
-    return out
-
-
-def sibling_key(row: dict) -> tuple:
-    return (row["env_id"], row["variant"], row["config"], row["train_guidance"], row["cond_dropout"], row["policy"],
-            row["null_branch"])  # fmt: skip
-
-
-def seeds_short(row: dict) -> str:
-    """`4 of 5 seeds` where a summary cell holds fewer seeds than its siblings (summarise), else ""."""
-    most = row.get("of_seeds", row["n_seeds"])
-    return f"{row['n_seeds']} of {most} seeds" if row["n_seeds"] < most else ""
-
-
-def short_cells_note(summary: list[dict], shown: int = 5) -> str | None:
-    """The line that names the cells with fewer seeds than their siblings, or None where there are none."""
-    short = [r for r in summary if seeds_short(r)]
-    if not short:
-        return None
-    named = "; ".join(f"{r['env_id']} {series_id(r['variant'], r['series'])} at step {r['step']}, "
-                      f"eval γ {r['eval_guidance']:g} ({seeds_short(r)})" for r in short[:shown])  # fmt: skip
-    more = f"; and {len(short) - shown} more" if len(short) > shown else ""
-    return (f"note: {len(short)} cell(s) hold fewer seeds than the other cells of their configuration, and say so "
-            f"in the tables: {named}{more}")  # fmt: skip
-
-
-def code_of(sources, provenance: dict | None) -> dict:
-    """`code` (the revision of the training code behind a cell's runs) and `code_date` (its last commit's
-    date, which orders revisions), as the provenance of its CSVs records them; "" where it does not."""
-    entries = [provenance_entry(provenance, s) for s in sources] if provenance else []
-    dates = {e.get("code_date", "") for e in entries} - {""}
-    return {"code": "/".join(sorted({e.get("code", "") for e in entries} - {""})), "code_date": min(dates, default="")}
-
-
-def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
-    """The MuJoCo version behind a MuJoCo task's cells: its config's `mujoco=`, else its CSVs' provenance."""
-    if not is_mujoco(env):
-        return ""
-    if "mujoco" in config_tokens(config):
-        return config_tokens(config)["mujoco"]
-    versions = {provenance_entry(provenance, s).get("mujoco", "") for s in sources} if provenance else set()
-    return "/".join(sorted(v for v in versions if v))
 
 
 # --- training curves (--runs) ---------------------------------------------------------------------
@@ -482,25 +270,6 @@ def incomplete_run(run_dir: Path, run_args: dict, accumulator) -> str | None:
 
 
 # --- provenance -----------------------------------------------------------------------------------
-
-
-def read_provenance(path: str | None) -> dict:
-    """{resolved CSV path: row} from a CSV with columns csv (relative to the repository), commits,
-    mujoco, machine, and optional code (the training code's revision), code_date (its commit's date, by
-    which figures tell older code) and notes. The repository is the nearest folder above the provenance file
-    that holds the listed CSV (an installed copy's own folder holds no results), else this file's."""
-    if path is None:
-        return {}
-    rows = read_csv(path)
-    if not rows or "csv" not in rows[0]:
-        raise InputError(f"{path} lacks a csv column; see results/provenance.csv")
-    folders = [*Path(path).resolve().parents, ROOT]
-    return {str(next((f / r["csv"] for f in folders if (f / r["csv"]).exists()), ROOT / r["csv"]).resolve()): r
-            for r in rows}  # fmt: skip
-
-
-def provenance_entry(provenance: dict, source: str) -> dict:
-    return provenance.get(str(Path(source).resolve()), {})
 
 
 def provenance_markdown(episodes: list[dict], provenance: dict) -> str:
@@ -659,18 +428,7 @@ def write(path: Path, data: str | bytes, written: list) -> None:
 
 
 def write_csv(path: Path, rows: list[dict], written: list) -> None:
-    columns = list(rows[0]) if rows else ["empty"]
-    lines = [",".join(columns)] + [",".join(csv_value(r[c]) for c in columns) for r in rows]
-    write(path, "\n".join(lines) + "\n", written)
-
-
-def csv_value(value) -> str:
-    if isinstance(value, float):
-        if math.isnan(value):
-            return ""
-        return f"{value:.4g}" if value and abs(value) < 1e-3 else str(round(value, 4))
-    text = str(value)
-    return f'"{text}"' if "," in text else text
+    write(path, table_csv(rows), written)
 
 
 def save_figure(fig, stem: Path, written: list) -> None:
@@ -706,12 +464,11 @@ def iqm_along(*samples, axis=-1):
     return np.take(x, np.arange(cut, n - cut), axis=axis).mean(axis=axis)
 
 
-def aggregate_iqm(summary) -> list[dict]:
-    """Per (variant, step, eval γ): IQM over (env, seed) of per-seed mean returns, normalised per env by
-    fixed references, the paper's PPO at the first and the last step of its table (0 and 1;
+def normalised_scores(summary) -> dict:
+    """{(variant, step, eval γ): [per env, its per-seed mean returns normalised]}: per env by fixed
+    references, the paper's PPO at the first and the last step of its table (0 and 1;
     agreement.paper_ppo_span), so that adding a γ or a variant moves no score; a task the paper did not
-    run is left out. 95% CI by a stratified percentile bootstrap: seeds are resampled within each env
-    (scipy.stats.bootstrap, one sample per env)."""
+    run is left out. The scores of the aggregate IQM and of the performance profile."""
     span = paper_ppo_span()
     groups = defaultdict(list)
     for r in summary:
@@ -722,8 +479,15 @@ def aggregate_iqm(summary) -> list[dict]:
         groups[(series_id(r["variant"], r["series"]), int(r["step"]), float(r["eval_guidance"]))].append(
             (seed_means - lo) / ((hi - lo) or 1.0)
         )
+    return groups
+
+
+def aggregate_iqm(summary) -> list[dict]:
+    """Per (variant, step, eval γ): IQM over (env, seed) of the normalised scores (normalised_scores).
+    95% CI by a stratified percentile bootstrap: seeds are resampled within each env
+    (scipy.stats.bootstrap, one sample per env)."""
     out = []
-    for (variant, step, gamma), per_env in sorted(groups.items()):
+    for (variant, step, gamma), per_env in sorted(normalised_scores(summary).items()):
         point = iqm(np.concatenate(per_env))
         low = high = math.nan
         if all(len(s) >= 2 for s in per_env):
@@ -733,6 +497,19 @@ def aggregate_iqm(summary) -> list[dict]:
         out.append({"variant": variant, "step": step, "eval_guidance": gamma, "n_envs": len(per_env),
                     "iqm": round(point, 4), "ci_low": round(float(low), 4), "ci_high": round(float(high), 4)})  # fmt: skip
     return out
+
+
+def performance_profiles(summary, points: int = 201) -> tuple[dict, int, int]:
+    """({(variant, eval γ): (τ, profile, low, high)}, step, envs): rliable's performance profile
+    (paper_study.stats.performance_profile) of each variant and eval γ at the last step, from the
+    aggregate IQM's normalised scores, on one grid of τ over the scores' range."""
+    scores = normalised_scores(summary)
+    step = max(s for _, s, _ in scores)
+    at_step = {(variant, gamma): per_env for (variant, s, gamma), per_env in scores.items() if s == step}
+    every = np.concatenate([np.concatenate(per_env) for per_env in at_step.values()])
+    taus = np.linspace(min(every.min(), 0.0) - 0.05, max(every.max(), 1.0) + 0.05, points)
+    envs = max(len(per_env) for per_env in at_step.values())
+    return {key: (taus, *performance_profile(per_env, taus)) for key, per_env in at_step.items()}, step, envs
 
 
 def simple_markdown(rows: list[dict]) -> str:
@@ -778,12 +555,10 @@ def generate_locked(args: Args) -> list[Path]:
         if written:
             write_manifest(output, previous | manifest_names(output, written), "plot_results.py")
         raise
-    # Learning curves come from --runs' TensorBoard events, which a rerun may not have: they are stale only
-    # where this run drew curves of its own.
-    kept = set() if args.runs else {name for name in previous if Path(name).stem == "learning_curves"}
-    for path in remove_stale(output, previous - kept - manifest_names(output, written)):
+    # Learning curves too: curves of another run's --runs would stand beside tables they are not of.
+    for path in remove_stale(output, previous - manifest_names(output, written)):
         print(f"note: removed {path}: the previous run into {output} wrote it, this one did not", file=sys.stderr)
-    write_manifest(output, kept | manifest_names(output, written), "plot_results.py")
+    write_manifest(output, manifest_names(output, written), "plot_results.py")
     return [*written, output / MANIFEST]
 
 
@@ -839,19 +614,45 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
         write_csv(output / "aggregate_iqm.csv", aggregate, written)
         write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
         for kind in sorted({r["kind"] for r in summary if r["env_id"] in paper_ppo_span()}):
-            of_kind = aggregate_iqm([r for r in summary if r["kind"] == kind])
-            save_figure(figures.aggregate_intervals(of_kind, kind), output / f"aggregate_iqm_{kind}", written)
+            of_kind = [r for r in summary if r["kind"] == kind]
+            save_figure(figures.aggregate_intervals(aggregate_iqm(of_kind), kind), output / f"aggregate_iqm_{kind}",
+                        written)  # fmt: skip
+            profile = figures.performance_profiles(*performance_profiles(of_kind), kind=kind)
+            save_figure(profile, output / f"performance_profile_{kind}", written)
     if args.runs:
         curves, left_out = training_curves(args.runs)
         for _, run_dir, why in left_out:
             print(f"note: the learning curves leave out {run_dir}: {why}", file=sys.stderr)
         save_figure(figures.learning_curves(curves, left_out), output / "learning_curves", written)
-    comparison = compare_with_paper(summary) if args.compare_paper else None
-    if comparison is not None:  # None where no swept task is the paper's: their tables and figures are the results
-        tasks = task_summaries(comparison, summary)
-        write_csv(output / "compare_paper.csv", comparison, written)
-        write_csv(output / "compare_paper_tasks.csv", tasks, written)
-        write(output / "compare_paper.md", comparison_markdown(comparison, summary, tasks), written)
+    if args.compare_paper:
+        compare_paper(summary, output, written)
+
+
+def compare_paper(summary: list[dict], output: Path, written: list[Path]) -> None:
+    """The agreement report, of the paper's configurations only (paper.is_paper_configuration): on the
+    paper's tasks a fork or any other configuration of a variant the paper tables is left out, and named
+    on stderr and in the report. Nothing is written where no swept task is the paper's."""
+    paper_tasks = {env for envs in PAPER_ENVS.values() for env in envs}
+    others = {(r["env_id"], r["config"]) for r in summary
+              if r["env_id"] in paper_tasks and paper_rows(r["variant"]) and not is_paper_configuration(r)}  # fmt: skip
+    left_out = [f"{env} `{config}`" for env, config in sorted(others)]
+    named = (f"Left out, not the paper's configuration (a fork, or training arguments other than the paper's): "
+             f"{'; '.join(left_out)}.\n")  # fmt: skip
+    if left_out:
+        print(f"note: left out of the comparison with the paper, not its configuration: {'; '.join(left_out)}",
+              file=sys.stderr)  # fmt: skip
+    cells = [r for r in summary if (r["env_id"], r["config"]) not in others]
+    if left_out and not any(r["env_id"] in paper_tasks for r in cells):
+        write(output / "compare_paper.md", f"# Against the paper\n\nNo cell compared.\n\n{named}", written)
+        return
+    comparison = compare_with_paper(cells)
+    if comparison is None:  # no swept task is the paper's: their tables and figures are the results
+        return
+    tasks = task_summaries(comparison, cells)
+    report = comparison_markdown(comparison, cells, tasks) + (f"\n{named}" if left_out else "")
+    write_csv(output / "compare_paper.csv", comparison, written)
+    write_csv(output / "compare_paper_tasks.csv", tasks, written)
+    write(output / "compare_paper.md", report, written)
 
 
 # --- the manifest of outputs ----------------------------------------------------------------------

@@ -51,7 +51,10 @@ from pgg_utils.files import (
     lock_directory,
     lock_holder,
     one_line_errors,
+    read_manifest,
+    remove_stale,
     write_atomic,
+    write_manifest,
 )
 from pgg_utils.progress import Progress
 
@@ -461,15 +464,18 @@ README_HEADER = "| run | env | variant | seed | steps | trained by |"
 def export_agents(specs: list[RunSpec], folder: Path) -> Path:
     """Every checkpoint of `specs` as a shipped agent, in the sweep's layout
     (<folder>/<run>/checkpoints/step_*.pt, so that eval_gamma_sweep.py sweeps the folder with the runs'
-    own names), and <folder>/README.md listing them with the command that trained each. The README keeps
-    the rows of runs exported into the folder before (one table's agents come from several grids).
-    Returns the README's path."""
+    own names), and <folder>/README.md listing them with the command that trained each. The folder holds
+    the agents of the tables beside it: those an earlier export wrote (listed in its outputs.txt, or runs
+    its README lists) that this one does not are removed (drop_stale_agents). Returns the README's path."""
     readme = folder / "README.md"
-    rows = {name: row for name, row in readme_rows(readme).items() if (folder / name).is_dir()}
+    earlier = read_manifest(folder) | {str(path.relative_to(folder)) for name in readme_rows(readme)
+                                       for path in runs.checkpoints_of(folder / name)}  # fmt: skip
+    rows, exported = {}, set()
     for spec in specs:
         checkpoints = runs.checkpoints_of(spec.run_dir)
         for checkpoint in checkpoints:
             runs.export_agent(checkpoint, folder / spec.name / "checkpoints" / checkpoint.name)
+            exported.add(f"{spec.name}/checkpoints/{checkpoint.name}")
         steps = ", ".join(f"{runs.checkpoint_step(c):,}" for c in checkpoints)
         command = " ".join(["python", Path(spec.command()[1]).name, *spec.command()[2:]])
         rows[spec.name] = f"| {spec.name} | {spec.env_id} | {spec.variant} | {spec.seed} | {steps} | `{command}` |"
@@ -487,7 +493,19 @@ def export_agents(specs: list[RunSpec], folder: Path) -> Path:
         *rows.values(),
         "",
     ]))  # fmt: skip
+    drop_stale_agents(folder, earlier - exported)
+    write_manifest(folder, exported, "reproduce.py")
     return readme
+
+
+def drop_stale_agents(folder: Path, names: set[str]) -> None:
+    """Removes the listed agents (files.remove_stale: only files inside `folder`), and each run folder
+    they leave empty, with a note per run."""
+    for run in sorted({Path(path).relative_to(folder).parts[0] for path in remove_stale(folder, names)}):
+        for empty in (folder / run / "checkpoints", folder / run):
+            with contextlib.suppress(OSError):  # a file of the user's keeps its folder
+                empty.rmdir()
+        print(f"note: removed the agents of {run} from {folder}: this grid's tables do not hold it", file=sys.stderr)
 
 
 def readme_rows(readme: Path) -> dict[str, str]:

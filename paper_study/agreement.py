@@ -42,8 +42,11 @@ BOOTSTRAP_RESAMPLES = 200_000  # of our seeds, where a task's bootstrap is too l
 
 
 def step_label(step: int) -> str:
-    """A checkpoint step as the paper writes it: 100k, 1M."""
-    return f"{step // 1_000_000}M" if step % 1_000_000 == 0 else f"{step // 1000}k"
+    """A checkpoint step as the paper writes it: 100k, 1M; a step that is no whole thousand exactly
+    (512, 2,048), never rounded into another mark's label."""
+    if step and step % 1_000_000 == 0:
+        return f"{step // 1_000_000}M"
+    return f"{step // 1000}k" if step and step % 1000 == 0 else f"{step:,}"
 
 
 def series_id(variant: str, series: str) -> str:

@@ -5,25 +5,31 @@ the mean action of its own episodes (pgg_utils.bc_null.reach, in units of σ), t
     python paper_study/bc_train_pilot.py runs/bc_pilot runs/sweeps/bc_pilot/episodes.csv
 """
 
-import csv
 import sys
 from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pgg_utils import bc_null, runs, scripts
+from pgg_utils.episodes import read_episodes, select_mode
+from pgg_utils.files import one_line_errors
+from pgg_utils.pooling import seed_means
 
 
 def main() -> None:
     run_root, episodes = Path(sys.argv[1]), Path(sys.argv[2])
     torch.set_num_threads(1)
-    returns = defaultdict(list)
-    with open(episodes, newline="") as f:
-        for row in csv.DictReader(f):
-            returns[(row["run"], float(row["eval_guidance"]))].append(float(row["return"]))
+    with one_line_errors():
+        rows = select_mode(read_episodes([episodes]), "sample", "learned")
+    last_step = defaultdict(int)
+    for row in rows:
+        last_step[row["run"]] = max(last_step[row["run"]], int(row["step"]))
+    at_last = [row for row in rows if int(row["step"]) == last_step[row["run"]]]
+    # one run is one seed: its per-seed mean is the run's mean return at that γ
+    returns = {key: mean for key, by_seed in seed_means(at_last, lambda r: (r["run"], float(r["eval_guidance"]))).items()
+               for mean in by_seed.values()}  # fmt: skip
     gammas = sorted({gamma for _, gamma in returns})
     print("| run | null_bc_coef | route | " + " | ".join(f"γ = {g:g}" for g in gammas) + " | reach (σ) |")
     print("|---|---|---|" + "---|" * (len(gammas) + 1))
@@ -33,7 +39,7 @@ def main() -> None:
         agent, module, _ = scripts.load_agent(ckpt, path)
         actions = bc_null.own_episodes(agent, ckpt, module.make_env(ckpt["env_id"]), 20, 30_000)
         reach = bc_null.reach(agent, ckpt["action_space"], agent.null_obs.detach(), actions)
-        cells = " | ".join(f"{np.mean(returns[(run_dir.name, g)]):.1f}" for g in gammas)
+        cells = " | ".join(f"{returns[(run_dir.name, g)]:.1f}" if (run_dir.name, g) in returns else "–" for g in gammas)
         print(
             f"| {run_dir.name} | {ckpt['args']['null_bc_coef']:g} | {ckpt['args']['null_bc_route']} | {cells} | {reach:.3f} |"
         )

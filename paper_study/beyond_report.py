@@ -49,6 +49,8 @@ from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.figures import steps_formatter, variant_colour
 from paper_study.paper import BEYOND_VARIANTS, PAPER_ENVS, paper_name, variant_rank
 from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, welch
+from pgg_utils import pooling
+from pgg_utils.episodes import read_episodes
 from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic
 from pgg_utils.pooling import mean_ci95
 
@@ -128,19 +130,14 @@ def read_trajectories(folder: Path) -> dict:
     return out
 
 
-def read_rows(path: Path) -> list[dict]:
-    with open(path, newline="") as f:
-        return [r for r in csv.DictReader(f) if r["policy"] == "sample" and r["null_branch"] == "learned"]
+def read_rows(path: Path, null_branch: str = "learned") -> list[dict]:
+    """A sweep's sampled episodes of one null branch, read by the one reader (pgg_utils.episodes)."""
+    return [r for r in read_episodes([path]) if r["policy"] == "sample" and r["null_branch"] == null_branch]
 
 
 def seed_means(rows: list[dict]) -> dict:
-    """{(env, variant, step, γ): {seed: mean return}}."""
-    returns = defaultdict(lambda: defaultdict(list))
-    for r in rows:
-        returns[(r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"]))][int(r["seed"])].append(
-            float(r["return"])
-        )
-    return {key: {seed: float(np.mean(v)) for seed, v in by_seed.items()} for key, by_seed in returns.items()}
+    """{(env, variant, step, γ): {seed: mean return}} (pgg_utils.pooling.seed_means)."""
+    return pooling.seed_means(rows, lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])))
 
 
 def cells_of(means: dict, env: str, variant: str) -> dict:
@@ -623,8 +620,7 @@ def read_bc(folder: Path, args: Args) -> tuple[dict, dict, list[tuple[str, str]]
         return {}, {}, [], {}
 
     def both_nulls(fitted_csv: Path, tables: tuple[str, ...]) -> dict:
-        with open(fitted_csv, newline="") as f:
-            fitted = [r for r in csv.DictReader(f) if r["policy"] == "sample" and r["null_branch"] == "bc"]
+        fitted = read_rows(fitted_csv, "bc")
         step_of = {(r["env_id"], r["variant"]): r["step"] for r in fitted}
         own = [r for table in tables if Path(table).exists() for r in read_rows(Path(table))
                if step_of.get((r["env_id"], r["variant"])) == r["step"]]  # fmt: skip

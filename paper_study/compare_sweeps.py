@@ -6,7 +6,7 @@
         --output results/continuous_device/compare_table.md
 
 A cell is (env, variant, checkpoint step, eval γ) with sampled actions and the learned null branch,
-its statistic the mean over seeds of each seed's mean return, as everywhere in `plot_results.py`.
+its statistic the mean over seeds of each seed's mean return, as everywhere in `plot_results.py` (paper_study.summary).
 Each cell present in both sweeps gets Welch's t test on the two sets of seed means, Holm-corrected
 over all the compared cells; per env and variant a sign test of first-above vs first-below. The
 seeds are not paired: seed 1 on two stacks is two unrelated runs.
@@ -22,10 +22,11 @@ import numpy as np
 import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import plot_results as plots
 from paper_study.agreement import compare_row, fmt, fmt_p, p_is, step_label
 from paper_study.paper import paper_name, variant_rank
 from paper_study.stats import ALPHA, correct_family, sign_test
+from paper_study.summary import config_tokens, read_episodes, summarise
+from pgg_utils.episodes import select_mode
 from pgg_utils.files import InputError, one_line_errors, write_atomic
 
 
@@ -44,7 +45,7 @@ class Args:
 def cells(path: str) -> dict:
     """{(env, variant, step, eval γ): summary row} of one sweep; one configuration per env and variant
     (its config label and its exact training guidance and dropout)."""
-    rows = plots.summarise(plots.select_mode(plots.read_episodes([path]), "sample", "learned"))
+    rows = summarise(select_mode(read_episodes([path]), "sample", "learned"))
     configs = defaultdict(set)
     for r in rows:
         configs[(r["env_id"], r["variant"])].add((r["config"], r["train_guidance"], r["cond_dropout"]))
@@ -58,7 +59,7 @@ def check_same_config(first: dict, second: dict) -> None:
     """The two sides of a cell must be one configuration, the stack (`mujoco=`) aside. A sweep from before
     configs were recorded has the variant alone, and is taken to be the variant's defaults."""
     for key in first.keys() & second.keys():
-        tokens = [plots.config_tokens(side[key]["config"]) for side in (first, second)]
+        tokens = [config_tokens(side[key]["config"]) for side in (first, second)]
         for t in tokens:
             t.pop("mujoco", None)
         if tokens[0] != tokens[1]:

@@ -20,11 +20,9 @@ import numpy as np
 
 from paper_study.agreement import other_mujoco, step_label
 from paper_study.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank, with_series
+from pgg_utils.episodes import RETURN_RANGE  # the possible return of a task: axes never extend past it
 from pgg_utils.pooling import mean_ci95
 
-# The possible return of a task, where it has one: axes never extend past it.
-RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
-                "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
 MARKERS = "osD^vPX*hp<>"
 # The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG
 # variants fixed, any other a fixed colour of its name) and one per eval γ. An eval γ takes the colour the
@@ -501,6 +499,32 @@ def aggregate_intervals(aggregate: list[dict], kind: str):
     style_axis(ax, f"{kind.capitalize()}: IQM over {envs} tasks × seeds at {step_label(last)} steps (95% CI)",
                "normalised score: 0 = the paper's PPO at its first step, 1 = at its last", "", steps_on_x=False)  # fmt: skip
     ax.grid(axis="y", visible=False)
+    return fig
+
+
+def performance_profiles(profiles: dict, step: int, envs: int, kind: str):
+    """rliable's performance profile beside the aggregate IQM, from the same normalised scores: one
+    panel per variant, one line per eval γ (its colour in every figure) of the fraction of (task, seed)
+    scores above each τ, its stratified-bootstrap 95% CI as a band; dotted lines at the two fixed
+    references. `profiles`: {(variant [series], eval γ): (taus, profile, low, high)}
+    (plot_results.performance_profiles)."""
+    variants = sorted({v for v, _ in profiles}, key=lambda v: (variant_rank(v.split(" [")[0]), v))
+    fig, axes = panels(len(variants))
+    entries = []
+    for ax, variant in zip(axes, variants, strict=True):
+        for gamma in sorted(g for v, g in profiles if v == variant):
+            taus, profile, low, high = profiles[(variant, gamma)]
+            colour = gamma_colour(gamma, kind)
+            (line,) = ax.plot(taus, profile, color=colour, linewidth=1.2, drawstyle="steps-post")
+            ax.fill_between(taus, low, high, color=colour, alpha=0.15, linewidth=0, step="post")
+            entries.append((gamma, f"γ = {gamma:g}", line))
+        for x in (0.0, 1.0):
+            ax.axvline(x, color="0.5", linestyle=":", linewidth=1)
+        ax.set_ylim(-0.02, 1.02)
+        style_axis(ax, series_label(variant), "normalised score τ", "fraction of runs with score > τ", steps_on_x=False)
+    legend_right(fig, entries, "eval γ")
+    fig.suptitle(f"{kind.capitalize()}: performance profile over {envs} tasks × seeds at {step_label(step)} steps "
+                 "(95% CI; 0 = the paper's PPO at its first step, 1 = at its last)", fontsize=TITLE_SIZE)  # fmt: skip
     return fig
 
 

@@ -29,11 +29,11 @@ from pathlib import Path
 import tyro
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import plot_results as plots
 from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.paper import paper_name, variant_rank
 from paper_study.selection import BASELINE_GAMMA, GROUP_COLUMNS, INCOMPLETE, TESTED, held_out, summary_by_env
 from paper_study.stats import ALPHA
+from pgg_utils.episodes import read_episodes, select_mode
 from pgg_utils.files import one_line_errors, write_atomic, write_csv_atomic
 
 
@@ -52,7 +52,7 @@ class Args:
 
 
 def episodes(path: str, args: Args) -> list[dict]:
-    return plots.select_mode(plots.read_episodes([path]), args.policy, args.null_branch)
+    return select_mode(read_episodes([path]), args.policy, args.null_branch)
 
 
 def seed_range(rows: list[dict]) -> str:

@@ -18,6 +18,7 @@ import numpy as np
 from scipy import stats
 
 from paper_study.stats import correct_family
+from pgg_utils import pooling
 from pgg_utils.files import InputError
 from pgg_utils.identity import configuration
 from pgg_utils.pooling import mean_ci95
@@ -42,12 +43,12 @@ def group_key(row: dict) -> tuple:
 
 def seed_means(rows: list[dict]) -> dict:
     """{group: {γ: {seed: mean return over that cell's episodes}}} of one sweep's rows, which hold one run
-    per configuration and seed (plot_results.read_episodes refuses pooled runs)."""
-    returns = defaultdict(lambda: defaultdict(lambda: defaultdict(list)))
-    for row in rows:
-        returns[group_key(row)][float(row["eval_guidance"])][int(row["seed"])].append(float(row["return"]))
-    return {key: {gamma: {seed: float(np.mean(v)) for seed, v in by_seed.items()} for gamma, by_seed in cells.items()}
-            for key, cells in returns.items()}  # fmt: skip
+    per configuration and seed (pgg_utils.episodes.read_episodes refuses pooled runs)."""
+    cells = pooling.seed_means(rows, lambda row: (group_key(row), float(row["eval_guidance"])))
+    out = defaultdict(dict)
+    for (key, gamma), by_seed in cells.items():
+        out[key][gamma] = by_seed
+    return dict(out)
 
 
 def check_same_checkpoints(selection: list[dict], fresh: list[dict]) -> None:

@@ -207,3 +207,18 @@ def bootstrap_coverage(n: int, samples: int = 4000, resamples: int = 1000, seed:
     means = values[:, rng.integers(0, n, size=(resamples, n))].mean(-1)
     low, high = np.percentile(means, [2.5, 97.5], axis=1)
     return float(((low <= 0) & (high >= 0)).mean())
+
+
+def performance_profile(per_task: list[np.ndarray], taus: np.ndarray, resamples: int = 2000, seed: int = 0):
+    """(profile, low, high), each of len(taus): rliable's performance profile (its score distribution,
+    `create_performance_profile` with `use_score_distribution=True`), the fraction of all (task, run)
+    scores above each threshold τ, with a stratified percentile bootstrap 95% interval: each task's runs
+    are resampled with replacement, `resamples` times (RNG `seed`). `per_task`: one array of run scores
+    per task, as the aggregate IQM pools them (a task with fewer runs weighs less, as in the IQM)."""
+    taus = np.asarray(taus, dtype=np.float64)
+    profile = (np.concatenate(per_task)[:, None] > taus).mean(axis=0)
+    rng = np.random.default_rng(seed)
+    drawn = np.concatenate([s[rng.integers(0, len(s), size=(resamples, len(s)))] for s in per_task], axis=1)
+    profiles = (drawn[:, :, None] > taus).mean(axis=1)  # (resamples, taus)
+    low, high = np.percentile(profiles, [2.5, 97.5], axis=0)
+    return profile, low, high

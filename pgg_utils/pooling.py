@@ -1,8 +1,9 @@
 """Pooling over seeds, once: the rule behind every statistic over seeds (within one configuration a seed
-is one run, and each episode of a cell is counted once) and the statistic itself, the mean over seeds
-and its 95% confidence interval."""
+is one run, and each episode of a cell is counted once), the per-seed mean return every such statistic
+starts from (seed_means), and the statistic itself, the mean over seeds and its 95% confidence interval."""
 
 import math
+from collections import defaultdict
 
 import numpy as np
 from scipy import stats
@@ -55,3 +56,13 @@ def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tup
     resampled = np.random.default_rng(0).choice(values, size=(bootstrap_samples, n)).mean(1)
     low, high = np.percentile(resampled, [2.5, 97.5])
     return mean, float((high - low) / 2), float(low), float(high)
+
+
+def seed_means(rows, key) -> dict:
+    """{key(row): {seed: mean return over that seed's episodes}}, seeds in numeric order: the per-seed
+    mean that every statistic over seeds starts from (the sweep's summary, the tables, the paper study).
+    The returns of a seed are summed in row order."""
+    returns = defaultdict(lambda: defaultdict(list))
+    for row in rows:
+        returns[key(row)][int(row["seed"])].append(float(row["return"]))
+    return {k: {seed: float(np.mean(v)) for seed, v in sorted(by_seed.items())} for k, by_seed in returns.items()}

@@ -24,6 +24,7 @@ from paper_study.stats import (
     holm,
     median_relative_gap,
     null_rates,
+    performance_profile,
     sd_from_ci,
     sign_test,
     welch,
@@ -298,6 +299,34 @@ def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
     assert float(cleanrl[0]["ref_mean"]) == 490.04
     assert float(cleanrl[0]["ref_sd"]) == pytest.approx(6.12 * 1.5**0.5, abs=1e-3)  # CleanRL's std has ddof 0, 3 seeds
     assert "mean ± standard deviation" in (tmp_path / "out" / "compare_paper.md").read_text()
+
+
+def test_compare_paper_compares_the_papers_configurations_only_and_names_the_rest(tmp_path):
+    """A reward-scaled fork's CartPole PPO (returns a tenth of the task's) was compared with the paper
+    (−86.2%) and nothing named the fork: a fork, or a run with another training argument, is left out of
+    the comparison and named in the report and on stderr; the paper's own configuration is compared."""
+    cell = ("CartPole-v1", "ppo", 500000, 1.0)
+    own = episode_rows({cell: [489.0, 490.0, 491.0]})  # config: the variant alone
+    fork = episode_rows({cell: [48.9, 49.0, 49.1]}, config="ppo script=ppo_pgg_scaled.py", run_suffix="_fork")
+    shorter = episode_rows({cell: [300.0, 301.0, 302.0]}, config="ppo learning_rate=0.002", run_suffix="_lr")
+    write_episodes(tmp_path / "episodes.csv", own + fork + shorter)
+    proc = run_cli(tmp_path / "episodes.csv", "--compare-paper", "--output", tmp_path / "out")
+    assert proc.returncode == 0, proc.stderr
+    named = "CartPole-v1 `ppo learning_rate=0.002`; CartPole-v1 `ppo script=ppo_pgg_scaled.py`"
+    assert f"note: left out of the comparison with the paper, not its configuration: {named}" in proc.stderr
+    rows = read_csv(tmp_path / "out" / "compare_paper.csv")
+    assert {r["config"] for r in rows} == {"ppo"} and {float(r["our_mean"]) for r in rows} == {490.0}
+    assert (
+        f"Left out, not the paper's configuration (a fork, or training arguments other than the paper's): {named}."
+        in (tmp_path / "out" / "compare_paper.md").read_text()
+    )
+    write_episodes(tmp_path / "fork.csv", fork)  # the fork alone: nothing is compared, and it is named
+    proc = run_cli(tmp_path / "fork.csv", "--compare-paper", "--output", tmp_path / "fork_out")
+    assert proc.returncode == 0 and "CartPole-v1 `ppo script=ppo_pgg_scaled.py`" in proc.stderr
+    assert not (tmp_path / "fork_out" / "compare_paper.csv").exists()
+    assert "No cell compared" in (tmp_path / "fork_out" / "compare_paper.md").read_text()
+    assert paper.is_paper_configuration({"variant": "pgg_g1.1", "config": "pgg_g1.1 mujoco=2.3.7"})
+    assert not paper.is_paper_configuration({"variant": "ppo", "config": "ppo null=bc"})
 
 
 # --- configurations -------------------------------------------------------------------------------
@@ -681,6 +710,47 @@ def test_batched_iqm_equals_scipy_trim_mean():
     assert plots.iqm_along(*samples, axis=-1) == pytest.approx(expected)
 
 
+def test_the_performance_profile_is_drawn_from_the_iqms_normalised_scores(sweep_dir, tmp_path):
+    """Beside the IQM, rliable's performance profile: at the last step, per variant and eval γ, the
+    fraction of the same normalised (env, seed) scores the IQM pools above each τ."""
+    written = generate(sweep_dir, tmp_path)
+    assert {
+        tmp_path / "out" / "performance_profile_discrete.png",
+        tmp_path / "out" / "performance_profile_discrete.pdf",
+    } <= set(written)
+    summary = summary_of(sweep_dir / "episodes.csv")
+    scores = plots.normalised_scores(summary)
+    profiles, step, envs = plots.performance_profiles(summary)
+    assert step == 200000 and envs == 2 and set(profiles) == {("ppo", 1.0), ("pgg_g1.1", 1.0), ("pgg_g1.1", 2.0)}
+    for (variant, gamma), (taus, profile, low, high) in profiles.items():
+        pooled = np.concatenate(scores[(variant, step, gamma)])
+        assert profile == pytest.approx([(pooled > tau).mean() for tau in taus])
+        assert np.all(low <= profile + 1e-12) and np.all(profile <= high + 1e-12)
+        iqm_row = next(
+            r
+            for r in plots.aggregate_iqm(summary)
+            if (r["variant"], r["step"], r["eval_guidance"]) == (variant, step, gamma)
+        )
+        assert iqm_row["iqm"] == round(float(stats.trim_mean(pooled, 0.25)), 4)  # the IQM's scores, the same
+    fig = figures.performance_profiles(profiles, step, envs, "discrete")
+    assert [ax.get_title() for ax in fig.axes if ax.get_visible()] == ["PPO", "PGG, γ_train = 1.1"]
+    matplotlib.pyplot.close(fig)
+
+
+def test_the_performance_profile_agrees_with_rliables():
+    """Checked once against rliable (needs pandas<3): the profile is equal, its stratified-bootstrap
+    interval within one step of the profile (1/30 here: 6 tasks × 5 runs), as two RNGs allow."""
+    rly = pytest.importorskip("rliable.library")
+    rng = np.random.default_rng(0)
+    per_task = [rng.normal(0.5, 0.3, 5) for _ in range(6)]
+    taus = np.linspace(-0.5, 1.5, 41)
+    profile, low, high = performance_profile(per_task, taus)
+    theirs, intervals = rly.create_performance_profile({"x": np.stack(per_task, axis=1)}, taus, reps=2000)
+    assert np.array_equal(profile, theirs["x"])
+    assert np.abs(low - intervals["x"][0]).max() <= 1 / 30 + 1e-9
+    assert np.abs(high - intervals["x"][1]).max() <= 1 / 30 + 1e-9
+
+
 def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
     with open(sweep_dir / "episodes.csv") as f:
         rows = [r for r in csv.DictReader(f) if r["env_id"] == "CartPole-v1" and r["step"] == "100000"]
@@ -909,17 +979,88 @@ def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
         assert err.count("\n") == 1 and err.startswith("error: ") and message in err, err
 
 
-def test_a_rerun_without_runs_keeps_the_learning_curves_a_run_with_them_drew(tmp_path):
-    """The curves come from TensorBoard events a rerun may not have (they are not committed): a rerun
-    without --runs neither redraws nor removes them."""
-    write_episodes(tmp_path / "a.csv", episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272]}))
+def test_a_replot_into_the_same_folder_drops_the_last_plots_learning_curves(tmp_path):
+    """`plot_results.py A --runs R --output X`, then `plot_results.py B --output X`: the curves of A's runs
+    (here of a task B does not hold) are not B's, so the rerun removes them and its outputs.txt does not
+    list them; a file no run listed (committed curves, before any manifest) stays."""
+    write_episodes(tmp_path / "a.csv", episode_rows({("CartPole-v1", "pgg_g1.1", 2048, 1.0): [20, 21, 22]}))
+    write_episodes(tmp_path / "b.csv", episode_rows({("Acrobot-v1", "ppo", 100000, 1.0): [-90, -89, -88]}))
+    write_run(tmp_path / "runs", "CartPole-v1__pgg_g1.1__s1", 1, 4096, checkpoints=(2048, 4096))
     out = tmp_path / "out"
-    out.mkdir()
-    (out / "learning_curves.png").write_bytes(b"drawn from --runs")
-    (out / "outputs.txt").write_text("# header\nlearning_curves.png\n")
-    plots.generate(plots.Args(sweeps=(str(tmp_path / "a.csv"),), output=str(out)))
-    assert (out / "learning_curves.png").read_bytes() == b"drawn from --runs"
-    assert "learning_curves.png" in (out / "outputs.txt").read_text()
+    first = plots.generate(
+        plots.Args(sweeps=(str(tmp_path / "a.csv"),), runs=(str(tmp_path / "runs"),), output=str(out))
+    )
+    assert {out / "learning_curves.png", out / "learning_curves.pdf"} <= set(first)
+    second = plots.generate(plots.Args(sweeps=(str(tmp_path / "b.csv"),), output=str(out)))
+    assert not (out / "learning_curves.png").exists() and not (out / "learning_curves.pdf").exists()
+    listed = set((out / "outputs.txt").read_text().splitlines()[1:])
+    assert listed == {p.name for p in second} - {"outputs.txt"} and not any("learning_curves" in n for n in listed)
+    (out / "outputs.txt").unlink()  # as in a fresh clone of results/, whose curves no manifest lists
+    (out / "learning_curves.png").write_bytes(b"committed, drawn from runs that are not committed")
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "b.csv"),), output=str(out)))
+    assert (out / "learning_curves.png").read_bytes() == b"committed, drawn from runs that are not committed"
+
+
+def test_checkpoint_marks_under_1k_or_between_thousands_are_labelled_exactly(tmp_path):
+    """Marks of 512 and 2,048 steps were "0k" and "2k" (two marks could share a label); whole thousands
+    and millions keep the paper's 100k and 1M."""
+    from paper_study.agreement import step_label
+
+    assert [step_label(s) for s in (512, 2048, 100_000, 500_000, 1_000_000, 1_500_000)] == [
+        "512", "2,048", "100k", "500k", "1M", "1500k"]  # fmt: skip
+    marks = {("CartPole-v1", "ppo", step, 1.0): [20, 21, 22] for step in (512, 1024)}
+    write_episodes(tmp_path / "a.csv", episode_rows(marks))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "a.csv"),), output=str(tmp_path / "out")))
+    table = (tmp_path / "out" / "table_discrete.md").read_text()
+    assert "| **512 Steps** |" in table and "| **1,024 Steps** |" in table and "0k Steps" not in table
+
+
+# --- one reader of episodes.csv --------------------------------------------------------------------
+
+
+def test_the_paper_study_reads_episodes_without_plot_results(tmp_path):
+    """The paper study's readers import pgg_utils.episodes (and paper_study.summary), not the top-level
+    plot_results: each runs with plot_results made unimportable."""
+    code = ("import sys; sys.modules['plot_results'] = None; sys.path.insert(0, '.'); "
+            "import paper_study.compare_sweeps, paper_study.heldout_gamma, paper_study.selection, "
+            "paper_study.bc_train_pilot, paper_study.summary; sys.path.insert(0, 'paper_study/data'); "
+            "import read_dropout_figure")  # fmt: skip
+    proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
+    """The sweep's summary ordered seeds as text ("10" before "2"), the tables as numbers: both now take
+    pooling.seed_means, so one cell's seed_means reads the same in summary.csv and in the tables, and the
+    held-out selection's per-seed means are the same numbers."""
+    import eval_gamma_sweep as sweep
+    from paper_study import selection
+
+    rows = [r | {"seed": seed, "run": f"CartPole-v1__ppo__s{seed}"}
+            for seed in (2, 10) for r in episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [20.0 * seed]})]  # fmt: skip
+    write_episodes(tmp_path / "episodes.csv", rows)
+    (table_cell,) = summary_of(tmp_path / "episodes.csv")
+    (sweep_cell,) = sweep.summarise([{k: str(v) for k, v in r.items()} for r in rows])
+    assert table_cell["seed_means"] == sweep_cell["seed_means"] == "40.0000;200.0000"
+    (group,) = selection.seed_means(plots.read_episodes([tmp_path / "episodes.csv"])).values()
+    assert group == {1.0: {2: 40.0, 10: 200.0}}
+
+
+def test_every_reader_of_episodes_refuses_a_cut_file(tmp_path):
+    """A cell short of episodes (a cut file) is refused in one line by each reader: plot_results, the
+    held-out γ, the comparison of two sweeps and the cloning pilot, which read it as whole before."""
+    from conftest import one_line_error, run_script
+
+    rows = episode_rows(SEED_MEANS)
+    write_episodes(tmp_path / "cut" / "episodes.csv", rows[:-1])
+    (tmp_path / "runs").mkdir()
+    cut = str(tmp_path / "cut" / "episodes.csv")
+    for script, flags in [("plot_results.py", [cut, "--output", str(tmp_path / "o")]),
+                          ("paper_study/heldout_gamma.py", [cut, cut, "--output", str(tmp_path / "h")]),
+                          ("paper_study/compare_sweeps.py", [cut, cut]),
+                          ("paper_study/bc_train_pilot.py", [str(tmp_path / "runs"), cut])]:  # fmt: skip
+        line = one_line_error(run_script(script, *flags))
+        assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (script, line)
 
 
 # --- partial inputs, damaged events, two writers: refused or named, never drawn as whole -------------

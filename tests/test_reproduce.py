@@ -60,25 +60,27 @@ def test_the_agents_are_exported_without_resume_state_and_sweep_to_the_same_epis
     assert (swept / "episodes.csv").read_text() == (local_results / "episodes.csv").read_text()
 
 
-def test_agents_of_a_second_grid_join_the_folder_and_its_readme(local_results, tmp_path):
-    """One table's agents come from several grids: exporting a second grid into the folder keeps the
-    first grid's agents and README rows, and drops the row of a run whose folder was removed."""
+def test_a_one_seed_grid_after_a_two_seed_grid_leaves_only_its_own_agents(local_results, tmp_path):
+    """`reproduce.py --preset quick --seeds 1` after the 2-seed preset left the seed-2 agents and their
+    README rows beside the 1-seed tables: the agents folder holds the agents of the tables beside it, so
+    an export removes those an earlier export wrote and it does not (their emptied folders too), and no
+    file of the user's."""
     import shutil
 
+    two_seeds = reproduce.grid(tiny_args(local_results.parent.parent, "local"))
+    one_seed = [s for s in two_seeds if s.seed == 1]
     folder = tmp_path / "agents"
-    shutil.copytree(local_results / "agents", folder)
-    first = reproduce.grid(tiny_args(local_results.parent.parent, "local"))
-    ppo, pgg = [s for s in first if s.variant == "ppo"], [s for s in first if s.variant == "pgg_g1.1"]
-    shutil.rmtree(folder)
-    reproduce.export_agents(ppo, folder)
-    reproduce.export_agents(pgg[:1], folder)
-    shutil.rmtree(folder / ppo[0].name)
-    reproduce.export_agents(pgg[1:], folder)
+    shutil.copytree(local_results / "agents", folder)  # the 2-seed grid's export
+    (folder / two_seeds[-1].name / "notes.md").write_text("the user's")
+    reproduce.export_agents(one_seed, folder)
     readme = (folder / "README.md").read_text()
     listed = [line.split(" | ")[0].removeprefix("| ") for line in readme.splitlines()[10:] if line.startswith("| ")]
-    assert listed == [ppo[1].name, pgg[0].name, pgg[1].name]
-    assert sorted(p.name for p in folder.iterdir() if p.is_dir()) == sorted(listed)
-    assert readme.count("| run | env |") == 1
+    assert sorted(listed) == sorted(s.name for s in one_seed) and readme.count("| run | env |") == 1
+    assert sorted(p.relative_to(folder).parts[0] for p in folder.rglob("step_*.pt")) == sorted(
+        s.name for s in one_seed for _ in runs.checkpoints_of(s.run_dir))  # fmt: skip
+    dirs = {p.name for p in folder.iterdir() if p.is_dir()}
+    assert dirs == {s.name for s in one_seed} | {two_seeds[-1].name}  # kept for the user's file alone
+    assert [p.name for p in (folder / two_seeds[-1].name).iterdir()] == ["notes.md"]
 
 
 def test_quick_preset_through_submitit_local_executor(local_results, tmp_path):

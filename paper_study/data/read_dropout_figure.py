@@ -31,9 +31,10 @@ from PIL import Image
 from scipy import stats
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-import plot_results  # from the repository root, added to the path above
 from paper_study.agreement import step_label
 from paper_study.stats import holm
+from paper_study.summary import read_episodes, read_provenance, summarise, table_csv
+from pgg_utils.episodes import select_mode
 from pgg_utils.files import InputError, write_atomic
 
 FIGURE_SIZE = (2586, 1319)  # the calibration below holds for this rendering of the figure only
@@ -104,10 +105,10 @@ def read_markers(pixels: np.ndarray) -> list[dict]:
 
 
 def our_summary(episodes: tuple[Path, ...], provenance: Path | None) -> list[dict]:
-    """plot_results' summary (statistics over seeds per cell) of our sweeps, sampled actions, learned null."""
+    """The tables' summary (paper_study.summary: statistics over seeds per cell) of our sweeps, sampled actions, learned null."""
     try:
-        rows = plot_results.select_mode(plot_results.read_episodes([str(p) for p in episodes]), "sample", "learned")
-        return plot_results.summarise(rows, plot_results.read_provenance(str(provenance) if provenance else None))
+        rows = select_mode(read_episodes([str(p) for p in episodes]), "sample", "learned")
+        return summarise(rows, read_provenance(str(provenance) if provenance else None))
     except InputError as e:
         sys.exit(f"error: {e}")
 
@@ -260,7 +261,7 @@ def main(args: Args) -> None:
             {**r, "paper_figure_mean": math.nan if r["paper_figure_mean"] is None else r["paper_figure_mean"]}
             for r in rows
         ]
-        plot_results.write_csv(args.csv, unread_as_nan, [])  # NaN is written as an empty field
+        write_atomic(args.csv, table_csv(unread_as_nan))  # NaN is written as an empty field
         print(f"wrote {args.csv} ({sum(r['paper_figure_mean'] is not None for r in rows)} of {len(rows)} markers read)")
     if args.beside is not None:
         side_by_side(paper, ours_figure, args.output)

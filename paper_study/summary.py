@@ -1,0 +1,211 @@
+"""The tables' summary of a sweep's episodes: one row per configuration, checkpoint step, eval γ and
+evaluation mode, with the statistics over seeds of the per-seed mean return (pgg_utils.pooling), the
+label that tells configurations of one task and variant apart, its table (discrete or continuous) and
+the MuJoCo version and code revision behind it. plot_results.py writes its tables and figures from
+these rows; compare_sweeps, heldout_gamma and the dropout figure's reader use the same. Reads episodes
+with pgg_utils.episodes, the one reader."""
+
+import math
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from paper_study.agreement import series_id
+from paper_study.paper import action_kind, variant_rank
+from pgg_utils import episodes as sweep_episodes
+from pgg_utils.files import InputError, read_csv
+from pgg_utils.identity import configuration, is_mujoco
+from pgg_utils.pooling import mean_ci95, seed_means
+
+ROOT = Path(__file__).resolve().parent.parent
+KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
+
+
+def read_episodes(paths) -> list[dict]:
+    """Every episode row of the given sweeps (pgg_utils.episodes.read_episodes: checked, whole, never
+    pooled), each with its `kind` (the table its env belongs to) besides its `config` and `_source`."""
+    return sweep_episodes.read_episodes(paths, check=with_kinds)
+
+
+def with_kinds(rows: list[dict]) -> None:
+    """Gives each row its `kind`; InputError where the CSVs disagree on an env's."""
+    for row in rows:
+        row["kind"] = kind_of(row, Path(row["_source"]))
+    check_one_kind(rows)
+
+
+def kind_of(row: dict, path: Path) -> str:
+    """The table a row belongs to, discrete or continuous: the action space its sweep recorded, else
+    the task's own (paper_study.paper.action_kind), never a guess from the env's name."""
+    recorded = row.get("action_space")
+    if recorded:
+        if recorded not in KINDS:
+            raise InputError(f"{path}: action_space {recorded!r} of {row['env_id']} is neither discrete nor continuous")
+        return recorded
+    try:
+        return action_kind(row["env_id"])
+    except ValueError as e:
+        raise InputError(f"{path} records no action_space for {row['env_id']}, and {e}") from None
+
+
+def check_one_kind(rows: list[dict]) -> None:
+    """An env belongs to one table: CSVs that disagree on its action space cannot both be right."""
+    first = {}  # env -> (kind, source)
+    for row in rows:
+        kind, source = first.setdefault(row["env_id"], (row["kind"], row["_source"]))
+        if kind != row["kind"]:
+            raise InputError(
+                f"{row['env_id']} has {kind} actions in {source} and {row['kind']} actions in {row['_source']}"
+            )
+
+
+def config_tokens(config: str) -> dict:
+    """`ppo learning_rate=0.002 mujoco=2.3.7` -> {"learning_rate": "0.002", "mujoco": "2.3.7"}."""
+    return dict(token.split("=", 1) for token in config.split()[1:] if "=" in token)
+
+
+def config_labels(pairs) -> dict:
+    """{(env, variant, config, guidance, dropout, source-set)} -> the label that tells configurations of
+    one env and variant apart: "" where the env and variant have one, else the arguments whose values
+    differ (`key=default` where a config does not set one; guidance and dropout exactly), with the
+    source folder added where that is still ambiguous."""
+    groups = defaultdict(dict)
+    for env, variant, config, guidance, dropout, sources in pairs:
+        groups[(env, variant)][(config, guidance, dropout)] = sources
+    labels = {}
+    for (env, variant), configs in groups.items():
+        if len(configs) == 1:
+            labels.update({(env, variant, *c): "" for c in configs})
+            continue
+        tokens = {c: config_tokens(c[0]) | {"guidance": repr(c[1]), "cond_dropout": repr(c[2])} for c in configs}
+        keys = sorted({k for t in tokens.values() for k in t})
+        differing = [k for k in keys if len({t.get(k) for t in tokens.values()}) > 1]
+        named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in differing) for c in configs}
+        for c in configs:
+            if not named[c] or list(named.values()).count(named[c]) > 1:
+                folders = sorted({Path(s).parent.name or s for s in configs[c]})
+                named[c] = " ".join(filter(None, [named[c], f"from {', '.join(folders)}"]))
+            labels[(env, variant, *c)] = named[c]
+    return labels
+
+
+def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
+    """One row per (configuration, step, γ, policy, null branch): statistics over seeds of the per-seed
+    mean episodic return, with the configuration's label (`series`), its table (`kind`) and MuJoCo
+    version."""
+    per_seed = seed_means(rows, cell_key)
+    sources, kinds, episodes = defaultdict(set), {}, defaultdict(int)
+    for row in rows:
+        sources[configuration(row)].add(row["_source"])
+        kinds[row["env_id"]] = row["kind"]
+        episodes[cell_key(row)] += 1
+    labels = config_labels((*c, frozenset(s)) for c, s in sources.items())
+    out = []
+    for key in sorted(per_seed, key=lambda k: (k[0], variant_rank(k[1]), *k[1:])):
+        env, variant, config, guidance, dropout, step, gamma, policy, null_branch = key
+        means = list(per_seed[key].values())
+        mean, half, _, _ = mean_ci95(means)
+        out.append({
+            "env_id": env, "variant": variant, "config": config, "train_guidance": guidance, "cond_dropout": dropout,
+            "kind": kinds[env], "series": labels[key[:5]],
+            "step": step, "eval_guidance": gamma, "policy": policy, "null_branch": null_branch,
+            "n_seeds": len(means), "n_episodes": episodes[key],
+            "mean": mean, "ci95": half, "sd": float(np.std(means, ddof=1)) if len(means) > 1 else math.nan,
+            "seed_means": ";".join(f"{m:.4f}" for m in means), "seeds": list(per_seed[key]),
+            "mujoco": mujoco_of(env, config, sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
+            **code_of(sources[key[:5]], provenance),
+        })  # fmt: skip
+    # A cell's siblings are the other cells of its configuration and evaluation mode: a run missing from
+    # one (a cut file, a run stopped before its last checkpoint) leaves it with fewer seeds, which it says.
+    most = defaultdict(int)
+    for r in out:
+        most[sibling_key(r)] = max(most[sibling_key(r)], r["n_seeds"])
+    for r in out:
+        r["of_seeds"] = most[sibling_key(r)]
+    return out
+
+
+def cell_key(row: dict) -> tuple:
+    """A summary cell of an episode row: its configuration, step, eval γ and evaluation mode."""
+    return (*configuration(row), int(row["step"]), float(row["eval_guidance"]), row["policy"], row["null_branch"])
+
+
+def sibling_key(row: dict) -> tuple:
+    return (row["env_id"], row["variant"], row["config"], row["train_guidance"], row["cond_dropout"], row["policy"],
+            row["null_branch"])  # fmt: skip
+
+
+def seeds_short(row: dict) -> str:
+    """`4 of 5 seeds` where a summary cell holds fewer seeds than its siblings (summarise), else ""."""
+    most = row.get("of_seeds", row["n_seeds"])
+    return f"{row['n_seeds']} of {most} seeds" if row["n_seeds"] < most else ""
+
+
+def short_cells_note(summary: list[dict], shown: int = 5) -> str | None:
+    """The line that names the cells with fewer seeds than their siblings, or None where there are none."""
+    short = [r for r in summary if seeds_short(r)]
+    if not short:
+        return None
+    named = "; ".join(f"{r['env_id']} {series_id(r['variant'], r['series'])} at step {r['step']}, "
+                      f"eval γ {r['eval_guidance']:g} ({seeds_short(r)})" for r in short[:shown])  # fmt: skip
+    more = f"; and {len(short) - shown} more" if len(short) > shown else ""
+    return (f"note: {len(short)} cell(s) hold fewer seeds than the other cells of their configuration, and say so "
+            f"in the tables: {named}{more}")  # fmt: skip
+
+
+def code_of(sources, provenance: dict | None) -> dict:
+    """`code` (the revision of the training code behind a cell's runs) and `code_date` (its last commit's
+    date, which orders revisions), as the provenance of its CSVs records them; "" where it does not."""
+    entries = [provenance_entry(provenance, s) for s in sources] if provenance else []
+    dates = {e.get("code_date", "") for e in entries} - {""}
+    return {"code": "/".join(sorted({e.get("code", "") for e in entries} - {""})), "code_date": min(dates, default="")}
+
+
+def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
+    """The MuJoCo version behind a MuJoCo task's cells: its config's `mujoco=`, else its CSVs' provenance."""
+    if not is_mujoco(env):
+        return ""
+    if "mujoco" in config_tokens(config):
+        return config_tokens(config)["mujoco"]
+    versions = {provenance_entry(provenance, s).get("mujoco", "") for s in sources} if provenance else set()
+    return "/".join(sorted(v for v in versions if v))
+
+
+# --- provenance ------------------------------------------------------------------------------------
+
+
+def read_provenance(path: str | None) -> dict:
+    """{resolved CSV path: row} from a CSV with columns csv (relative to the repository), commits,
+    mujoco, machine, and optional code (the training code's revision), code_date (its commit's date, by
+    which figures tell older code) and notes. The repository is the nearest folder above the provenance file
+    that holds the listed CSV (an installed copy's own folder holds no results), else this file's."""
+    if path is None:
+        return {}
+    rows = read_csv(path)
+    if not rows or "csv" not in rows[0]:
+        raise InputError(f"{path} lacks a csv column; see results/provenance.csv")
+    folders = [*Path(path).resolve().parents, ROOT]
+    return {str(next((f / r["csv"] for f in folders if (f / r["csv"]).exists()), ROOT / r["csv"]).resolve()): r
+            for r in rows}  # fmt: skip
+
+
+def provenance_entry(provenance: dict, source: str) -> dict:
+    return provenance.get(str(Path(source).resolve()), {})
+
+
+def table_csv(rows: list[dict]) -> str:
+    """The text of an output CSV of summary-like rows: numbers rounded to 4 places (tiny ones to 4
+    significant digits), NaN as an empty field."""
+    columns = list(rows[0]) if rows else ["empty"]
+    lines = [",".join(columns)] + [",".join(csv_value(r[c]) for c in columns) for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def csv_value(value) -> str:
+    if isinstance(value, float):
+        if math.isnan(value):
+            return ""
+        return f"{value:.4g}" if value and abs(value) < 1e-3 else str(round(value, 4))
+    text = str(value)
+    return f'"{text}"' if "," in text else text

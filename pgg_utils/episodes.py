@@ -1,0 +1,102 @@
+"""The one reader of a sweep's episodes.csv, for plot_results and the paper study: every row checked
+(its columns, a finite number where one belongs, a return its task allows), the file checked whole
+against its sweep's record (files.check_record) or, without one, cell by cell, and runs never pooled
+(pooling.check_one_run_per_seed). The per-seed means its readers start from are pooling.seed_means,
+which the sweep's own summary uses too. Plain Python: nothing of the paper study."""
+
+import math
+from collections import defaultdict
+from pathlib import Path
+
+from pgg_utils.files import InputError, check_record, read_csv_columns
+from pgg_utils.identity import configuration
+from pgg_utils.pooling import cell_of, check_one_run_per_seed
+
+FILE_NAME = "episodes.csv"
+REQUIRED_COLUMNS = {"env_id", "variant", "train_guidance", "cond_dropout", "step", "eval_guidance", "policy",
+                    "null_branch", "seed", "return"}  # fmt: skip
+NUMBER_COLUMNS = ("return", "train_guidance", "cond_dropout", "eval_guidance")
+INTEGER_COLUMNS = ("step", "seed")
+# The possible return of a task, where it has one: a return outside it is an edited file (and figures'
+# axes never extend past it).
+RETURN_RANGE = {"CartPole-v1": (0.0, 500.0), "Acrobot-v1": (-500.0, 0.0), "InvertedPendulum-v4": (0.0, 1000.0),
+                "InvertedPendulum-v5": (0.0, 1000.0)}  # fmt: skip
+
+
+def episodes_csv(raw) -> Path:
+    """A sweep's episodes.csv, given the file or the sweep's folder."""
+    path = Path(raw)
+    return path / FILE_NAME if path.is_dir() else path
+
+
+def read_episodes(paths, check=None) -> list[dict]:
+    """Every episode row of the given sweeps (files or folders), each with its `config` (the variant
+    where the CSV has no such column) and `_source` (the CSV it came from). InputError with one line for
+    a file that is missing, empty or no sweep's, a value no sweep writes, a file that differs from its
+    sweep's record or (without one) holds a cell with fewer episodes than its other cells, and for two
+    runs that would count as one seed of a configuration or one episode counted twice. `check(rows)`: a
+    reader's own check of every row read (e.g. the tables' action space), before runs are compared."""
+    rows = []
+    for raw in paths:
+        path = episodes_csv(raw)
+        if not path.exists():
+            raise InputError(f"no sweep CSV at {path}")
+        columns, of_file = read_csv_columns(path)
+        if columns is None:
+            raise InputError(f"{path} is empty")
+        missing = REQUIRED_COLUMNS - set(columns)
+        if missing:
+            raise InputError(f"{path} lacks columns {sorted(missing)}; is it an episodes.csv of eval_gamma_sweep.py?")
+        check_record(path, len(of_file))
+        for line, row in enumerate(of_file, start=2):
+            check_values(row, f"{path}, line {line}")
+            row["config"] = row.get("config") or row["variant"]
+            row["_source"] = str(path)
+        check_whole_cells(of_file, path)
+        rows.extend(of_file)
+    if check is not None:
+        check(rows)
+    check_one_run_per_seed(rows, configuration, cell_of, source=lambda row: row["_source"])
+    return rows
+
+
+def check_values(row: dict, where: str) -> None:
+    """InputError with one line for a value no sweep writes (an edited episodes.csv): a number column
+    that is not a finite number, a step or seed that is not an integer, a return outside what its task
+    allows (RETURN_RANGE)."""
+    for column in (*NUMBER_COLUMNS, *INTEGER_COLUMNS):
+        value = row[column]
+        try:
+            number = int(value) if column in INTEGER_COLUMNS else float(value)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{where}: {column} {value!r} is not a{'n integer' if column in INTEGER_COLUMNS else ' number'}"
+            ) from None
+        if not math.isfinite(number):
+            raise InputError(f"{where}: {column} {value!r} is not finite")
+    low, high = RETURN_RANGE.get(row["env_id"], (-math.inf, math.inf))
+    if not low <= float(row["return"]) <= high:
+        raise InputError(f"{where}: return {row['return']} is outside what {row['env_id']} allows, [{low:g}, {high:g}]")
+
+
+def check_whole_cells(rows: list[dict], path: Path) -> None:
+    """A sweep evaluates every cell of one CSV (run, step, γ, evaluation mode) for the same number of
+    episodes: InputError where a cell holds fewer than the others, the mark of a cut or edited file."""
+    counts = defaultdict(int)
+    for row in rows:
+        counts[(*configuration(row), row["seed"], *cell_of(row))] += 1
+    most = max(counts.values(), default=0)
+    short = {cell: n for cell, n in counts.items() if n < most}
+    if short:
+        (env, _, config, _, _, seed, step, gamma, *_), n = next(iter(short.items()))
+        raise InputError(f"{path}: {len(short)} cell(s) hold fewer episodes than the other cells' {most}, e.g. {env} "
+                         f"{config} seed {seed} at step {step}, eval γ {gamma}: {n} (a cut or edited file); rerun the "
+                         "sweep to write it whole")  # fmt: skip
+
+
+def select_mode(rows: list[dict], policy: str, null_branch: str) -> list[dict]:
+    """The rows of one evaluation mode; InputError where there are none."""
+    selected = [r for r in rows if r["policy"] == policy and r["null_branch"] == null_branch]
+    if not selected:
+        raise InputError(f"no episodes with policy={policy} and null_branch={null_branch}")
+    return selected
