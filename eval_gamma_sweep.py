@@ -38,14 +38,29 @@ naming both. Checkpoints whose model holds a NaN or an infinity are skipped, nev
 Outputs (in --output, locked against a second sweep while this one runs): cells/*.csv, one per
 finished (checkpoint, γ) cell, written atomically and named by the bytes of the checkpoint that were
 evaluated, the γ, the settings, the evaluation stack (the mujoco, gymnasium, numpy and torch versions,
-recorded in every row) and the evaluating code (the script's sha1 and a custom task's). A rerun reuses
-a cell only if it is whole and every row's checksum holds, so an interrupted sweep (Ctrl-C: exit
-status 130) loses only the cells in flight, a damaged cell is evaluated again, and so is every cell
-after an edit to the script or the task. Then episodes.csv (every episode of the requested cells,
-sorted), summary.csv (per env, variant, config, step and γ: mean over seeds of the per-seed mean
-return, and its 95% confidence interval, see `mean_ci95`), skipped.csv, evaluated_by.csv, and
-written.csv: episodes.csv, summary.csv and skipped.csv with their numbers of rows and sha256, by which
+recorded in every row) and every file of code that runs in its episodes: this sweep's file (or a copy
+of it), the script that evaluates the checkpoint, a custom task's module, and each project module these
+import, read from their import statements (evaluation_code). A rerun reuses a cell only if it is whole
+and every row's checksum holds, so an interrupted sweep (Ctrl-C: exit status 130) loses only the cells
+in flight, a damaged cell is evaluated again, and so is every cell after an edit to any of that code.
+Then episodes.csv (every episode of the requested cells, sorted), summary.csv (per env, variant,
+config, step and γ: mean over seeds of the per-seed mean return, and its 95% confidence interval, see
+`mean_ci95`), skipped.csv, evaluated_by.csv, and written.csv: episodes.csv, summary.csv and skipped.csv with their numbers of rows and sha256, by which
 plot_results.py refuses an episodes.csv that is not whole.
+
+Returns and faults. An episode's return is the task's own: the one that gymnasium's RecordEpisodeStatistics,
+which the script's make_env puts directly on the task, records at its end, whatever make_env adds around it
+(a reward scale); for a script whose make_env has none, the sum of make_env's rewards, the figure its
+training logged (records_episodes). A checkpoint is skipped, with one line in skipped.csv and on stderr,
+and the sweep goes on, where its task's spaces are not those it was trained on (pgg_utils.spaces), or where
+during its episodes the task raises, or returns an observation or a reward holding a NaN or an infinity.
+
+Changing the episodes. Copy this file and edit `evaluate_cell`, the one episode loop of a cell: an
+observation transform goes where the loop reads `obs`, and a per-episode metric is one more entry of the
+dict it returns, one value per episode, written after the sweep's columns in every cell and in
+episodes.csv (a name of the sweep's own columns, or not one value per episode, is refused in one line).
+The copy's cells are its own: its file is part of every cell's identity, so the original's cells are
+never reused by it, nor its cells by the original, even in one --output.
 """
 
 from pgg_utils import startup  # first: a Ctrl-C during the imports below is one line, status 130
@@ -71,9 +86,19 @@ import numpy as np
 import torch
 import tyro
 
-from pgg_utils import runs, scripts
+from pgg_utils import runs, scripts, spaces
 from pgg_utils.arguments import DEFAULT_GAMMAS, guidance_error
-from pgg_utils.cells import EPISODE_COLUMNS, STACK_COLUMNS, cell_path, evaluation_stack, read_cell, write_cell
+from pgg_utils.cells import (
+    EPISODE_COLUMNS,
+    STACK_COLUMNS,
+    cell_path,
+    code_digest,
+    evaluation_stack,
+    extra_columns,
+    imported_files,
+    read_cell,
+    write_cell,
+)
 from pgg_utils.fast import MIN_FORWARD_ROWS, standard_gumbel
 from pgg_utils.files import (
     InputError,
@@ -183,9 +208,16 @@ class GuidedPolicy:
         per observation, used unless deterministic."""
         return self.agent.act(raw_obs, guidance, deterministic, noise, **self.null)
 
-    def make_env(self):
-        """An evaluation env of the checkpoint's task, made as the script that evaluates the agent makes it."""
-        return self.module.make_env(self.env_id)()
+    def make_env(self, render_mode: str | None = None):
+        """An evaluation env of the checkpoint's task, made by the `make_env` of the script that evaluates
+        the agent; with `render_mode`, one that renders (--video). A script whose make_env takes no
+        render_mode (written before it did) renders gymnasium's env wrapped as the original scripts did."""
+        if render_mode is None:
+            return self.module.make_env(self.env_id)()
+        if "render_mode" in inspect.signature(self.module.make_env).parameters:
+            return self.module.make_env(self.env_id, render_mode=render_mode)()
+        env = gym.make(self.env_id, render_mode=render_mode)
+        return gym.wrappers.FlattenObservation(env) if self.kind == "continuous" else env
 
 
 def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
@@ -201,9 +233,80 @@ def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_
 
 
 def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
+    """The task's time limit, and the size of one step's action noise: the number of actions of the
+    checkpoint's Discrete space, the size of its Box (spaces.recorded; action_error refuses a Box of
+    more than one dimension)."""
     horizon = env.spec.max_episode_steps  # every swept task has one (evaluation_of)
-    size = ckpt["n_actions"] if ckpt["action_space"] == "discrete" else ckpt["action_dim"]
+    action = spaces.recorded(ckpt)["action"]
+    size = (
+        action["n"] if ckpt["action_space"] == "discrete" else int(np.prod(action.get("shape", [ckpt["action_dim"]])))
+    )
     return horizon, size
+
+
+def action_error(ckpt: dict, action_space: gym.Space) -> str | None:
+    """One line where the sweep cannot act in the checkpoint's Box action space: one of more than one
+    dimension, in training or now (the agent's actions are flat vectors; flatten the action in make_env to
+    train on such a task). A size that changed since training is spaces.mismatch's."""
+    if not isinstance(action_space, gym.spaces.Box) or ckpt["action_space"] != "continuous":
+        return None
+    trained = tuple(spaces.recorded(ckpt)["action"].get("shape", ()))
+    shape = next((s for s in (action_space.shape, trained) if len(s) > 1), None)
+    if shape is not None:
+        return (f"its task's actions are a Box of shape {shape}; the agent acts with flat vectors of "
+                f"{ckpt['action_dim']}: flatten the action in make_env (and train on that) to sweep it")  # fmt: skip
+    return None
+
+
+class EpisodeFault(Exception):
+    """The task failed during an episode: it raised, or returned a non-finite observation; one line."""
+
+
+def first_line(error: BaseException) -> str:
+    return f"{type(error).__name__}: {str(error).splitlines()[0]}" if str(error) else type(error).__name__
+
+
+def reset_task(env, seed: int, episode: int, gamma: float):
+    """env.reset(seed=seed)'s observation; EpisodeFault where the task raises or returns a NaN or an infinity."""
+    try:
+        obs, _ = env.reset(seed=seed)
+    except Exception as e:
+        raise EpisodeFault(
+            f"episode {episode} at γ = {gamma:g}: the task raised {first_line(e)} at its reset"
+        ) from None
+    if not np.isfinite(obs).all():
+        raise EpisodeFault(f"episode {episode} at γ = {gamma:g}: the task's reset returned a non-finite observation")
+    return obs
+
+
+def step_task(env, action, episode: int, gamma: float, t: int):
+    """env.step(action); EpisodeFault, naming the episode and the step, where the task raises."""
+    try:
+        return env.step(action)
+    except Exception as e:
+        raise EpisodeFault(
+            f"episode {episode} at γ = {gamma:g}: the task raised {first_line(e)} at step {t + 1}"
+        ) from None
+
+
+def records_episodes(env) -> bool:
+    """Whether the script's make_env puts gymnasium's RecordEpisodeStatistics on the task: then an
+    episode's return is the one it records at the episode's end (info["episode"]["r"]), the task's own
+    whatever make_env adds around it (a reward scale). A make_env without one (a script written before
+    it held one) had its training returns recorded outside it, on make_env's rewards: the sweep sums
+    those, which is the same figure training logged."""
+    while isinstance(env, gym.Wrapper):
+        if isinstance(env, gym.wrappers.RecordEpisodeStatistics):
+            return True
+        env = env.env
+    return False
+
+
+def recorded_return(info: dict, episode: int, gamma: float) -> float:
+    if "episode" not in info:
+        raise EpisodeFault(f"episode {episode} at γ = {gamma:g}: make_env's RecordEpisodeStatistics reported no "
+                           "return at the episode's end (info['episode'])")  # fmt: skip
+    return info["episode"]["r"]
 
 
 def cell_rows(episodes: int) -> int:
@@ -213,42 +316,54 @@ def cell_rows(episodes: int) -> int:
 
 def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_seed: int, deterministic: bool):
     """One (checkpoint, γ) cell: its episodes step together, one row each, in a batch of their own.
-    Returns (returns, lengths), each of shape (episodes,).
+    Returns its per-episode columns, {"return": ..., "length": ...}, each of shape (episodes,) (a copy
+    of the sweep adds its own here: the module docstring's "Changing the episodes"). EpisodeFault
+    where the task raises or returns a NaN or an infinity.
 
     An episode that ends keeps its row (holding its last observation) until the whole cell is done,
     so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the first
     step to the last: what a cell computes is a function of the checkpoint, γ and the settings alone
     (the module docstring's Exactness)."""
     envs = [policy.make_env() for _ in range(episodes)]
-    horizon, action_size = horizon_and_action_size(envs[0], ckpt)
-    # (horizon, episodes, action_size): the noise of time step t is one contiguous block.
-    noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)], axis=1)
-    guidance = np.full(episodes, float(gamma))
-    obs = np.stack([env.reset(seed=eval_seed + k)[0] for k, env in enumerate(envs)])
-    policy.reset()
-    returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
-    running = np.ones(episodes, dtype=bool)
-    t = 0
-    while running.any():
-        actions = policy.act(obs, guidance, noise[t], deterministic)
-        for i in np.flatnonzero(running):
-            obs[i], reward, terminated, truncated, _ = envs[i].step(actions[i])
-            returns[i] += reward
-            lengths[i] += 1
-            if terminated or truncated:
-                running[i] = False
-        t += 1
-    for env in envs:
-        env.close()
-    return returns, lengths
+    try:
+        horizon, action_size = horizon_and_action_size(envs[0], ckpt)
+        # (horizon, episodes, action_size): the noise of time step t is one contiguous block.
+        noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)], 1)
+        guidance = np.full(episodes, float(gamma))
+        obs = np.stack([reset_task(env, eval_seed + k, k, gamma) for k, env in enumerate(envs)])
+        policy.reset()
+        recorded = records_episodes(envs[0])
+        returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
+        running = np.ones(episodes, dtype=bool)
+        t = 0
+        while running.any():
+            actions = policy.act(obs, guidance, noise[t], deterministic)
+            for i in np.flatnonzero(running):
+                obs[i], reward, terminated, truncated, info = step_task(envs[i], actions[i], i, gamma, t)
+                lengths[i] += 1
+                if not recorded:
+                    returns[i] += reward
+                if terminated or truncated:
+                    running[i] = False
+                    if recorded:
+                        returns[i] = recorded_return(info, i, gamma)
+            if not np.isfinite(obs).all():
+                episode = int(np.flatnonzero(~np.isfinite(obs).reshape(episodes, -1).all(1))[0])
+                raise EpisodeFault(f"episode {episode} at γ = {gamma:g}: the task returned a non-finite observation "
+                                   f"at step {t + 1}")  # fmt: skip
+            t += 1
+    finally:
+        for env in envs:
+            env.close()
+    return {"return": returns, "length": lengths}
 
 
 def evaluate_batched(policy: GuidedPolicy, ckpt, gammas, episodes, eval_seed, deterministic):
     """The cells of several γ values of one checkpoint, one after the other (evaluate_cell); returns
     (returns, lengths), each (len(gammas), episodes), and the number of environment steps taken."""
     cells = [evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, deterministic) for gamma in gammas]
-    returns = np.stack([r for r, _ in cells]).reshape(len(gammas), episodes)
-    lengths = np.stack([n for _, n in cells]).reshape(len(gammas), episodes)
+    returns = np.stack([cell["return"] for cell in cells]).reshape(len(gammas), episodes)
+    lengths = np.stack([cell["length"] for cell in cells]).reshape(len(gammas), episodes)
     return returns, lengths, int(lengths.sum())
 
 
@@ -269,8 +384,9 @@ def play_episode(env, policy: GuidedPolicy, ckpt, gamma: float, eval_seed: int, 
     `after_step()` is called after the reset and after every step (to render a frame)."""
     horizon, action_size = horizon_and_action_size(env, ckpt)
     noise = episode_noise(policy.kind, eval_seed, episode, horizon, action_size)
-    obs, _ = env.reset(seed=eval_seed + episode)
+    obs = reset_task(env, eval_seed + episode, episode, gamma)
     policy.reset()
+    recorded = records_episodes(env)
     total, t, done = 0.0, 0, False
     while True:
         if after_step is not None:
@@ -278,8 +394,10 @@ def play_episode(env, policy: GuidedPolicy, ckpt, gamma: float, eval_seed: int, 
         if done:
             return total, t
         action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], deterministic)[0]
-        obs, reward, terminated, truncated, _ = env.step(action)
+        obs, reward, terminated, truncated, info = step_task(env, action, episode, gamma, t)
         total, t, done = total + float(reward), t + 1, terminated or truncated
+        if done and recorded:
+            total = float(recorded_return(info, episode, gamma))
 
 
 # --- cells, resumption, output ---------------------------------------------------------------------
@@ -319,7 +437,16 @@ def run_job(job: Job) -> JobResult:
     except Exception as e:
         return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}")
     policy = GuidedPolicy(agent, ckpt, uniform_null, module)
-    returns, lengths = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
+    try:
+        columns = evaluate_cell(policy, ckpt, job.gamma, episodes, eval_seed, deterministic)
+    except EpisodeFault as e:  # the task's fault: none of the checkpoint's cells is tabled, the sweep goes on
+        return JobResult(job, None, [], 0, f"{job.checkpoint}: {e}; none of its cells is tabled")
+    except Exception as e:  # a fork's agent or make_env failing mid-episode: the same
+        return JobResult(job, None, [], 0, f"{job.checkpoint}: at γ = {job.gamma:g}: {first_line(e)}; "
+                                           "none of its cells is tabled")  # fmt: skip
+    returns, lengths = columns.pop("return"), columns.pop("length")
+    if error := added_columns_error(columns, episodes):
+        return JobResult(job, None, [], 0, f"{job.checkpoint}: {error}")
     if not np.isfinite(returns).all():
         bad = np.flatnonzero(~np.isfinite(returns))
         return JobResult(job, None, [], 0, f"{job.checkpoint}: episode {bad[0]} at γ = {job.gamma:g} returned "
@@ -341,10 +468,23 @@ def run_job(job: Job) -> JobResult:
         "action_space": ckpt["action_space"],
     }
     rows = [
-        {**common, "episode": k, "episode_seed": eval_seed + k, "return": float(returns[k]), "length": int(lengths[k])}
+        {**common, "episode": k, "episode_seed": eval_seed + k, "return": float(returns[k]), "length": int(lengths[k]),
+         **{column: values[k] for column, values in columns.items()}}
         for k in range(episodes)
     ]  # fmt: skip
     return JobResult(job, digest, rows, int(lengths.sum()), None)
+
+
+def added_columns_error(columns: dict, episodes: int) -> str | None:
+    """One line where a per-episode column that evaluate_cell adds cannot be written: a name of the
+    sweep's own columns, or not one value per episode."""
+    for column, values in columns.items():
+        if column in EPISODE_COLUMNS or column == "checksum" or not column.isidentifier():
+            return (f"evaluate_cell's column {column!r} is refused: per-episode columns it adds need a name of "
+                    "their own (letters, digits, underscores; none of the sweep's columns)")  # fmt: skip
+        if np.shape(values) != (episodes,):
+            return f"evaluate_cell's column {column!r} has shape {np.shape(values)}, not one value per episode ({episodes})"
+    return None
 
 
 GROUP_COLUMNS = SUMMARY_COLUMNS[:9]  # a summary row per (env, variant, config, ..., γ, policy, null branch)
@@ -435,19 +575,26 @@ def start_pool(workers: int, jobs: list[Job]) -> tuple[ProcessPoolExecutor, dict
     thread that forks them). Unlike multiprocessing.Pool, which replaces a worker that dies and waits
     forever for the cell it held, this pool breaks: every unfinished cell fails with BrokenProcessPool."""
     pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), init_worker, (os.getpid(),))
-    pool.submit(os.getpid)  # starts the workers; they are counted before any can die in a cell
-    processes = {p.pid: p for p in multiprocessing.active_children()}
-    return pool, {pool.submit(run_job, job): job for job in jobs}, processes
+    try:
+        pool.submit(os.getpid)  # starts the workers; they are counted before any can die in a cell
+        processes = {p.pid: p for p in multiprocessing.active_children()}
+        return pool, {pool.submit(run_job, job): job for job in jobs}, processes
+    except BaseException:  # Ctrl-C while starting: the caller holds no pool yet to stop
+        stop_pool(pool, {p.pid: p for p in multiprocessing.active_children()})
+        raise
 
 
 def stop_pool(pool: ProcessPoolExecutor, processes: dict) -> None:
-    """Ends the workers now, their cells in flight lost (Ctrl-C, or a pool broken by a dead worker)."""
-    pool.shutdown(wait=False, cancel_futures=True)
+    """Ends the workers now, their cells in flight lost (Ctrl-C, a pool broken by a dead worker, or the
+    sweep's end), then the pool, waiting for its manager thread. That thread must be gone before the
+    interpreter exits: Python 3.11's exit hook (concurrent.futures.process._python_exit) writes to the
+    thread's wakeup pipe without the lock under which the thread closes it, so a thread still closing its
+    pipe at exit makes that write fail ("Exception ignored ... OSError: [Errno 9] Bad file descriptor")."""
     for process in processes.values():
         process.terminate()  # SIGTERM, which how_workers_died tells from any other end
     for process in processes.values():
         process.join()
-    pool.shutdown(wait=True)
+    pool.shutdown(wait=True, cancel_futures=True)  # the workers are gone: the manager thread ends at once
 
 
 def how_workers_died(processes: dict) -> str:
@@ -479,30 +626,64 @@ class Evaluation:
     record: dict
 
 
-def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], task_code: dict) -> Evaluation:
-    """How a checkpoint is evaluated, by the script that trained it. The
-    evaluator fingerprint is that script's sha1 and the sha1 of a custom task's code (scripts.task_sources;
-    gymnasium's own tasks are named by its version in the stack), so an edit to either re-evaluates the
-    cells. `task_code` caches the task's code by (script, env). ValueError (one line) where the script
-    cannot be found or load the checkpoint, or the task cannot be made."""
+@dataclass(frozen=True)
+class Task:
+    """A checkpoint's task as the script that evaluates it makes it: its spaces, and the digest of every file
+    of code that runs in a cell's episodes (evaluation_code)."""
+
+    observation_space: gym.Space
+    action_space: gym.Space
+    code: str
+
+
+def evaluation_code(script: Path, task_files) -> str:
+    """The digest of the code that runs in a cell's episodes: the file of this sweep (or of a copy of it,
+    whichever runs), the script that evaluates the checkpoint, a custom task's module (scripts.task_sources;
+    gymnasium's own tasks are named by its version in the stack), and every project module that these
+    import (cells.imported_files). An edit to any of them, or another copy of the sweep, re-evaluates the cells."""
+    return code_digest(imported_files([Path(__file__), script, *task_files]))
+
+
+def task_of(module, script: Path, env_id: str) -> Task:
+    """The task of `env_id` as `module` makes it. ValueError (one line) where it cannot be made or has no time limit."""
+    try:
+        env = module.make_env(env_id)()
+    except Exception as e:  # a custom task's module gone, an id no longer registered: whatever make raises
+        raise ValueError(f"cannot make environment {env_id!r} ({first_line(e)})") from None
+    task = Task(env.observation_space, env.action_space, evaluation_code(script, scripts.task_sources(env_id, env)))
+    bounded = env.spec is not None and env.spec.max_episode_steps
+    env.close()
+    if not bounded:
+        raise ValueError(f"{env_id} has no time limit (max_episode_steps), so an episode may never end; "
+                         "register it with one, e.g. gym.register(..., max_episode_steps=1000)")  # fmt: skip
+    return task
+
+
+def task_error(ckpt: dict, task: Task) -> str | None:
+    """One line where the task's spaces are not those the checkpoint was trained on (spaces.mismatch), or
+    its actions are not ones the sweep can act in (action_error)."""
+    if error := action_error(ckpt, task.action_space):
+        return error
+    if error := spaces.mismatch(spaces.recorded(ckpt), task.observation_space, task.action_space):
+        return f"its task {ckpt['env_id']} has changed since training: {error}; not evaluated"
+    return None
+
+
+def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], tasks: dict) -> Evaluation:
+    """How a checkpoint is evaluated, by the script that trained it, and the fingerprint of the code that
+    computes its cells (evaluation_code). `tasks` caches the task by (script, env). ValueError (one line)
+    where the script cannot be found or load the checkpoint, or the task cannot be made or is not the one it
+    was trained on (task_error)."""
     _, module, script = scripts.load_agent(ckpt, checkpoint, given)  # proves its Agent holds the weights, once
     key = (script, ckpt["env_id"])
-    if key not in task_code:
-        try:
-            env = module.make_env(ckpt["env_id"])()
-        except Exception as e:  # a custom task's module gone, an id no longer registered: whatever make raises
-            raise ValueError(f"cannot make environment {ckpt['env_id']!r} ({type(e).__name__}: "
-                             f"{str(e).splitlines()[0] if str(e) else ''})") from None  # fmt: skip
-        task_code[key] = scripts.task_sources(ckpt["env_id"], env)
-        bounded = env.spec is not None and env.spec.max_episode_steps
-        env.close()
-        if not bounded:
-            raise ValueError(f"{ckpt['env_id']} has no time limit (max_episode_steps), so an episode may never end; "
-                             "register it with one, e.g. gym.register(..., max_episode_steps=1000)")  # fmt: skip
+    if key not in tasks:
+        tasks[key] = task_of(module, script, ckpt["env_id"])
+    if error := task_error(ckpt, tasks[key]):
+        raise ValueError(error)
     script_sha1 = scripts.file_sha1(script)
     trained_sha1 = ckpt.get("code", {}).get("script_sha1")
     same = "unknown" if trained_sha1 is None else "yes" if trained_sha1 == script_sha1 else "no"
-    evaluator = "|".join([script_sha1, *(f"{file}={sha1}" for file, sha1 in sorted(task_code[key].items()))])
+    evaluator = tasks[key].code
     record = {"run": checkpoint.parent.parent.name, "step": ckpt["step_mark"], "env_id": ckpt["env_id"],
               "trained_by": scripts.script_name(ckpt), "evaluated_by": scripts.recorded_path(script),
               "evaluated_by_sha1": script_sha1, "same_script": same}  # fmt: skip
@@ -515,11 +696,11 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
     and those whose script cannot be found or load them go to `skipped`. InputError if two checkpoints
     are the same experiment, seed and step (two runs that would count as one seed)."""
     settings, cells, experiments, labels, evaluations = settings_of(args), {}, {}, {}, {}
-    given, task_code = tuple(Path(path).resolve() for path in args.script), {}
+    given, tasks = tuple(Path(path).resolve() for path in args.script), {}
     for checkpoint in checkpoints:
         try:
             digest, ckpt = read_checkpoint(checkpoint)
-            evaluation = evaluation_of(checkpoint, ckpt, given, task_code)
+            evaluation = evaluation_of(checkpoint, ckpt, given, tasks)
             fields = configuration_fields(ckpt)
             identity = (ckpt["env_id"], fields["config"], fields["train_guidance"], fields["cond_dropout"],
                         ckpt["args"]["seed"], ckpt["step_mark"])  # fmt: skip
@@ -573,15 +754,21 @@ def sweep_locked(args: Args, output: Path, checkpoints: list[Path], skipped: lis
                     print(f"re-evaluating {path}: {e}", file=sys.stderr)
         print(f"{len(checkpoints)} checkpoints, {len(cells)} cells, {len(finished)} already done", file=sys.stderr)
         withheld = evaluate_missing(args, output, stack, cells, finished, skipped, evaluations)
-        rows = []
+        rows, added = [], {}
         for (checkpoint, _), cell_rows in finished.items():
             if checkpoint not in withheld:
+                added.setdefault(tuple(extra_columns(cell_rows[0])), checkpoint)
                 # The label of today's rule: a cell written before the rule changed keeps its numbers but
                 # must not split its run from the cells written after.
-                rows.extend({**{c: row[c] for c in EPISODE_COLUMNS}, "config": labels[checkpoint]} for row in cell_rows)
+                rows.extend({**row, "config": labels[checkpoint]} for row in cell_rows)
+        if len(added) > 1:
+            raise InputError(f"the cells carry different added columns ({' and '.join(map(str, added))}); "
+                             "evaluate_cell must add the same per-episode columns to every cell")  # fmt: skip
+        columns = [*EPISODE_COLUMNS, *next(iter(added), ())]
+        rows = [{column: row[column] for column in columns} for row in rows]
         rows.sort(key=episode_sort_key)
         summary = summarise(rows, args.ci, args.bootstrap_samples)
-        write_csv_atomic(output / "episodes.csv", EPISODE_COLUMNS, rows)
+        write_csv_atomic(output / "episodes.csv", columns, rows)
         write_csv_atomic(output / "summary.csv", SUMMARY_COLUMNS, summary)
         write_csv_atomic(output / "skipped.csv", ["reason"], [{"reason": s} for s in skipped])
         evaluated = [evaluations[c].record | {"config": labels[c]} for c in sorted(evaluations) if c not in withheld]
@@ -664,11 +851,9 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
 
 
 def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, eval_seed: int, episode: int, deterministic: bool):
-    """Episode `episode` of a sweep cell at `gamma`, played as evaluate_sequential plays it, with its
-    frames; returns (frames, return)."""
-    env = gym.make(ckpt["env_id"], render_mode="rgb_array")
-    if ckpt["action_space"] == "continuous":
-        env = gym.wrappers.FlattenObservation(env)  # as the training script's make_env
+    """Episode `episode` of a sweep cell at `gamma`, played as evaluate_sequential plays it, in an env of the
+    script's own make_env that renders, with its frames; returns (frames, return)."""
+    env = policy.make_env(render_mode="rgb_array")
     frames = []
     total, _ = play_episode(
         env, policy, ckpt, gamma, eval_seed, episode, deterministic, lambda: frames.append(env.render())
@@ -686,25 +871,32 @@ def record_videos(args: Args) -> list[Path]:
         raise InputError(f"--video records one checkpoint; {len(checkpoints)} found "
                          "(name a checkpoint file, or narrow with --steps)")  # fmt: skip
     try:
-        agent, ckpt = load_any_checkpoint(checkpoints[0], tuple(Path(path).resolve() for path in args.script))
+        _, ckpt = read_checkpoint(checkpoints[0])
+        agent, module, _ = scripts.load_agent(ckpt, checkpoints[0], tuple(Path(path).resolve() for path in args.script))
     except ValueError as e:
         raise InputError(f"{checkpoints[0]}: {e}") from None
+    policy = GuidedPolicy(agent, ckpt, args.uniform_null, module)
     try:
-        probe = gym.make(ckpt["env_id"], render_mode="rgb_array")
+        probe = policy.make_env(render_mode="rgb_array")
     except Exception as e:
-        raise InputError(f"cannot make environment {ckpt['env_id']!r}: {e}") from None
-    error = runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
+        raise InputError(f"cannot make environment {ckpt['env_id']!r} ({first_line(e)})") from None
+    changed = task_error(ckpt, Task(probe.observation_space, probe.action_space, ""))
+    error = None if changed else runs.video_error(probe)  # the training scripts' check: moviepy, a renderer
     fps = probe.metadata.get("render_fps") or 30
     probe.close()
+    if changed:
+        raise InputError(f"{checkpoints[0]}: {changed}")
     if error:
         raise InputError(error.replace("--capture-video", "--video"))
-    policy = GuidedPolicy(agent, ckpt, args.uniform_null)
     output = Path(args.video)
     output.mkdir(parents=True, exist_ok=True)
     gammas = args.gammas if args.gammas is not None else DEFAULT_GAMMAS[ckpt["action_space"]]
     written, panels = [], []
     for gamma in gammas:
-        frames, total = record_episode(policy, ckpt, gamma, args.eval_seed, args.video_episode, args.deterministic)
+        try:
+            frames, total = record_episode(policy, ckpt, gamma, args.eval_seed, args.video_episode, args.deterministic)
+        except EpisodeFault as e:
+            raise InputError(f"{checkpoints[0]}: {e}") from None
         write_video(output / f"gamma_{gamma:g}.mp4", frames, fps)
         written.append(output / f"gamma_{gamma:g}.mp4")
         panels.append([labelled(frame, f"γ = {gamma:g}   return {total:.1f}") for frame in frames])

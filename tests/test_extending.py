@@ -565,8 +565,8 @@ def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_origi
     original.load_state_dict(ckpt["model"])
     for gamma in (1.0, 1.5):
         swept = [float(r["return"]) for r in rows if r["run"] == "fork_s1" and float(r["eval_guidance"]) == gamma]
-        own, _ = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt), ckpt, gamma, 3, 10_000, True)
-        tanh, _ = sweep.evaluate_cell(sweep.GuidedPolicy(original.eval(), ckpt), ckpt, gamma, 3, 10_000, True)
+        own = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt), ckpt, gamma, 3, 10_000, True)["return"]
+        tanh = sweep.evaluate_cell(sweep.GuidedPolicy(original.eval(), ckpt), ckpt, gamma, 3, 10_000, True)["return"]
         assert swept == own.tolist() and swept != tanh.tolist()
     # The original script's loader refuses the fork's checkpoint in one line.
     with pytest.raises(ValueError, match="was trained by .*ppo_pgg_relu.py, not ppo_pgg_continuous.py"):

@@ -264,40 +264,56 @@ TASK = """
 import math
 
 import gymnasium as gym
-import gymnasium as gym
 import numpy as np
 
 
 class Walk(gym.Env):
-    observation_space = gym.spaces.Box(-np.inf, np.inf, (2,), np.float32)
-    action_space = gym.spaces.Discrete(2)
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), np.float32)
+    action_space = gym.spaces.Discrete(N_ACTIONS)
+
+    def __init__(self, render_mode=None):
+        self.render_mode = render_mode
 
     def reset(self, seed=None, options=None):
         super().reset(seed=seed)
         self.t = 0
-        return np.zeros(2, np.float32), {}
+        return np.zeros(OBS_DIM, np.float32), {}
 
     def step(self, action):
         self.t += 1
+        if RAISE_AT == self.t:
+            raise RuntimeError("the simulator diverged")
         reward = math.nan if NAN_AT == self.t else 1.0
-        return self.np_random.normal(size=2).astype(np.float32), reward, False, self.t >= 30, {}
+        obs = self.np_random.normal(size=OBS_DIM).astype(np.float32)
+        if NAN_OBS_AT == self.t:
+            obs[0] = math.nan
+        return obs, reward, False, self.t >= 30, {}
 
 
 gym.register("FaultWalk-v0", entry_point=Walk, **REGISTER)
 """
+# The task as it is trained; a test changes some of these for the sweep.
+TASK_SETTINGS = {"NAN_AT": None, "RAISE_AT": None, "NAN_OBS_AT": None, "OBS_DIM": 2, "N_ACTIONS": 2,
+                 "REGISTER": "dict(max_episode_steps=30)"}  # fmt: skip
 
 
-def trained_on_custom_task(tmp_path, monkeypatch, nan_at=None, register="max_episode_steps=30") -> Path:
-    """A tiny discrete run on a task of a module of its own, then that module rewritten for the sweep:
-    NaN rewards from step `nan_at`, or registered with `register` (its time limit)."""
+def task_module(path: Path, **settings) -> None:
+    path.write_text("".join(f"{name} = {value}\n" for name, value in {**TASK_SETTINGS, **settings}.items()) + TASK)
+
+
+def trained_on_custom_task(tmp_path, monkeypatch, nan_at=None, register="max_episode_steps=30", trained=None,
+                           **swept) -> Path:  # fmt: skip
+    """A tiny discrete run on a task of a module of its own (with the `trained` settings of TASK_SETTINGS),
+    then that module rewritten for the sweep: NaN rewards from step `nan_at`, registered with `register`
+    (its time limit), and the `swept` settings."""
     module = tmp_path / "tasks" / "fault_walk_task.py"
     module.parent.mkdir(parents=True, exist_ok=True)
-    module.write_text("NAN_AT = None\nREGISTER = dict(max_episode_steps=30)\n" + TASK)
+    task_module(module, **(trained or {}))
     monkeypatch.syspath_prepend(str(module.parent))
     forget_task()
     args = tiny_discrete_args(tmp_path, "fault_walk_task:FaultWalk-v0")
     run_dir = train(ppo_pgg_discrete, args)
-    module.write_text(f"NAN_AT = {nan_at}\nREGISTER = dict({register})\n" + TASK)
+    task_module(module, NAN_AT=nan_at, REGISTER=f"dict({register})", **swept)
     forget_task()
     return run_dir
 
@@ -338,3 +354,106 @@ def test_a_task_whose_module_is_gone_is_skipped_in_one_line(tmp_path, monkeypatc
                            str(tmp_path / "out"), "--episodes", "2"], capture_output=True, text=True, timeout=300)  # fmt: skip
     assert proc.returncode == 2 and "Traceback" not in proc.stderr, proc.stderr
     assert "cannot make environment 'fault_walk_task:FaultWalk-v0' (ModuleNotFoundError" in proc.stderr
+
+
+def swept_beside_a_good_checkpoint(run_dir: Path, tmp_path, capsys) -> tuple[list[dict], str]:
+    """Sweeps `run_dir` with the format-2 fixture beside it; (the rows of skipped.csv, stderr). The fixture's
+    episodes must all be there: the sweep went on."""
+    output = sweep.sweep(sweep_args(tmp_path / "out", run_dir, FORMAT_2, episodes=4))
+    stderr = capsys.readouterr().err
+    rows = files.read_csv(output / "episodes.csv")
+    assert {r["run"] for r in rows} == {"cartpole_format2"} and len(rows) == 8, stderr
+    assert "Traceback" not in stderr, stderr
+    return files.read_csv(output / "skipped.csv"), stderr
+
+
+def the_one_skip(skipped: list[dict], stderr: str, run_dir: Path) -> str:
+    """The one reason of skipped.csv, checked to name a checkpoint of `run_dir` and to be on stderr, in one line."""
+    (row,) = skipped
+    reason = row["reason"]
+    assert reason.startswith(str(run_dir)) and "\n" not in reason
+    assert [line for line in stderr.splitlines() if line.startswith("skipped ")] == [f"skipped {reason}"]
+    return reason
+
+
+@pytest.mark.parametrize(
+    "swept,message",
+    [
+        ({"RAISE_AT": 5}, "episode 0 at γ = 1: the task raised RuntimeError: the simulator diverged at step 5"),
+        ({"NAN_OBS_AT": 7}, "episode 0 at γ = 1: the task returned a non-finite observation at step 7"),
+    ],
+)
+def test_a_task_that_fails_mid_episode_skips_its_checkpoint_and_the_sweep_goes_on(tmp_path, monkeypatch, capsys,
+                                                                                  swept, message):  # fmt: skip
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch, **swept)
+    capsys.readouterr()
+    reason = the_one_skip(*swept_beside_a_good_checkpoint(run_dir, tmp_path, capsys), run_dir)
+    assert message in reason and reason.endswith("none of its cells is tabled"), reason
+
+
+@pytest.mark.parametrize(
+    "trained,swept,message",
+    [
+        ({"OBS_DIM": 3}, {"OBS_DIM": 1}, "has changed since training: observation shape (3,) in training, (1,) now"),
+        ({"N_ACTIONS": 1}, {"N_ACTIONS": 4}, "has changed since training: action n 1 in training, 4 now"),
+    ],
+)
+def test_a_task_whose_spaces_changed_since_training_is_skipped_in_one_line(tmp_path, monkeypatch, capsys, trained,
+                                                                            swept, message):  # fmt: skip
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch, trained=trained, **swept)
+    capsys.readouterr()
+    evaluated = count_jobs(monkeypatch)
+    reason = the_one_skip(*swept_beside_a_good_checkpoint(run_dir, tmp_path, capsys), run_dir)
+    assert message in reason, reason
+    assert {job.checkpoint.parent.parent for job in evaluated} == {FORMAT_2.parent.parent}  # never played
+
+
+def test_video_of_a_checkpoint_whose_task_changed_is_one_line(tmp_path, monkeypatch):
+    run_dir = trained_on_custom_task(tmp_path, monkeypatch, trained={"OBS_DIM": 3}, OBS_DIM=1)
+    checkpoint = runs.checkpoints_of(run_dir)[-1]
+    args = sweep.Args(paths=(str(checkpoint),), gammas=(1.0,), video=str(tmp_path / "videos"))
+    with pytest.raises(files.InputError, match=r"has changed since training: observation shape \(3,\) in training"):
+        sweep.record_videos(args)
+    assert not (tmp_path / "videos").exists()
+
+
+BOX_TASK = """
+import gymnasium as gym
+import numpy as np
+
+
+class Reach(gym.Env):
+    observation_space = gym.spaces.Box(-np.inf, np.inf, (3,), np.float32)
+    action_space = gym.spaces.Box(-1.0, 1.0, SHAPE, np.float32)
+
+    def reset(self, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return np.zeros(3, np.float32), {}
+
+    def step(self, action):
+        self.t += 1
+        return self.np_random.normal(size=3).astype(np.float32), -float(np.square(action).sum()), False, self.t >= 20, {}
+
+
+gym.register("BoxReach-v0", entry_point=Reach, max_episode_steps=20)
+"""
+
+
+def test_a_box_action_of_two_dimensions_is_refused_in_one_line_not_broadcast(tmp_path, monkeypatch, capsys):
+    """A task whose Box action became (2, 2) after training on a flat Box(4): the sweep acts with flat vectors,
+    so it refuses the checkpoint in one line, never a broadcast error (training refuses such a space itself)."""
+    module = tmp_path / "tasks" / "box_reach_task.py"
+    module.parent.mkdir()
+    module.write_text("SHAPE = (4,)\n" + BOX_TASK)
+    monkeypatch.syspath_prepend(str(module.parent))
+    run_dir = train(ppo_pgg_continuous, ppo_pgg_continuous.Args(
+        env_id="box_reach_task:BoxReach-v0", output_dir=str(tmp_path / "runs"), total_timesteps=256, num_steps=128,
+        num_minibatches=2, update_epochs=1, checkpoint_interval=256,
+    ))  # fmt: skip
+    module.write_text("SHAPE = (2, 2)\n" + BOX_TASK)
+    sys.modules.pop("box_reach_task", None)
+    gym.registry.pop("box_reach_task:BoxReach-v0", None)
+    gym.registry.pop("BoxReach-v0", None)
+    reason = the_one_skip(*swept_beside_a_good_checkpoint(run_dir, tmp_path, capsys), run_dir)
+    assert "actions are a Box of shape (2, 2)" in reason and "broadcast" not in reason, reason
