@@ -24,7 +24,6 @@ management (run directories, checkpoints, resume, progress) is in `pgg_utils.run
 from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports below is one line, status 130)
 
 # isort: split
-import math
 import sys
 from collections import defaultdict
 from dataclasses import asdict, dataclass
@@ -35,32 +34,27 @@ import numpy as np
 import torch
 import tyro
 from torch import nn
-from torch.distributions import Normal, kl_divergence
 
-from pgg_utils import checkpoints, runs, scripts, spaces, training_state
-from pgg_utils.arguments import RunArgs, acting_error, answer_cleanrl_habits
-from pgg_utils.fast import (
-    evaluation_forward,
-    flatten_parameters,
-    numpy_network,
-)
-from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
-from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm, normalise_obs, update_running_moments
+from pgg_utils import loading, runs, spaces, training_state
+from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
+from pgg_utils.distributions import Gaussian, guide  # PGG: guide, the mix of the branches' parameters
+from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network
+from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
+from pgg_utils.normalisation import NormalizeClipReward, ObservationStatistics, RunningObsNorm
 from pgg_utils.policy import (
     branch_pass,
     eval_mode,
     frozen,
-    guidance_none_error,  # PGG
+    guided_actions,  # PGG
     null_pass,  # PGG
     numpy_policy,
-    observation_error,
     path_error,
     probe_observations,
     refuse,
+    trained_parameters,
 )
 
 ACTION_SPACE = "continuous"  # the checkpoints' kind; the sweep picks this script by it
-LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
 
 
 @dataclass
@@ -130,12 +124,10 @@ def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None
 def make_vector_env(
     env_id: str, num_envs: int, seed: int, discount: float, reward_clip: float, video_dir: Path | None = None
 ) -> gym.vector.VectorEnv:
-    """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE
-    below relies on). Episode statistics are recorded on raw rewards, in make_env, before normalisation.
-    Observations come out raw: the agent normalises them itself (RunningObsNorm). The wrappers sit on
-    each sub-env, as in CleanRL (so do the reward statistics), cheaper than gymnasium 1.4's vector
-    versions (pgg_utils/normalisation.py). With `video_dir`, the first sub-env's episodes are recorded there (CleanRL's
-    schedule: episodes 0, 1, 8, 27, ..., 1000, 2000, ...)."""
+    """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE below relies on).
+    Episode statistics are recorded on raw rewards, in make_env; observations come out raw (the agent normalises them,
+    RunningObsNorm). The wrappers sit on each sub-env, as in CleanRL, cheaper than gymnasium 1.4's vector versions.
+    With `video_dir`, the first sub-env's episodes are recorded there (CleanRL's schedule: episodes 0, 1, 8, 27, ...)."""
 
     def training_env(video_dir: Path | None):
         env = gym.wrappers.ClipAction(make_env(env_id, video_dir)())
@@ -194,6 +186,7 @@ class Agent(nn.Module):
             self.null_mask[list(null_dims)] = True  # PGG
         # The task's action bounds (low, high) that actions are clipped to when acting; not trained.
         self.action_bounds = action_bounds
+        self.obs_shape = (obs_dim,)  # what `act` takes
 
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
         return self.critic(obs).squeeze(-1)
@@ -249,30 +242,13 @@ class Agent(nn.Module):
 
     @torch.no_grad()
     def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:  # PGG
-        """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for raw
-        observations (one, or a batch): normalised inside, sampled with standard normal `noise` shaped
-        like the actions (drawn from torch's generator if None) or the mode if `deterministic`, and
-        clipped to the task's bounds. `mean_null`: the unconditional mean where the caller holds it
-        (the sweep computes it once). The sweep acts through this method. ValueError, one line, for an
-        observation of another shape than training's, a guidance outside training's rule ([0, 1000]) or
-        an observation holding a NaN or an infinity."""
+        """Actions of pi_hat at `guidance` (a number, or one per row) for raw observations (one, or a batch), as the
+        sweep acts: sampled with standard normal `noise` shaped like the actions (torch's generator's if None), or the
+        mode if `deterministic`, clipped to the task's bounds; `mean_null` where the caller holds it. ValueError, one
+        line, for an input training would refuse (pgg_utils.policy.guided_actions)."""
         raw = np.asarray(raw_obs, dtype=np.float64)
-        if error := observation_error(raw, self.obs_norm.mean.shape) or guidance_none_error(guidance):  # PGG
-            raise ValueError(error)
-        guidance = np.asarray(guidance, dtype=np.float64)  # PGG
-        if error := acting_error(raw, guidance):  # PGG: training's and the sweep's guidance rule
-            raise ValueError(error)
-        single = raw.ndim == 1
-        pi = self.acting_policy(raw[None] if single else raw, guidance, mean_null)  # PGG
-        if deterministic:
-            actions = pi.mode()
-        else:
-            shape = pi.mode().shape
-            actions = pi.sample(torch.randn(shape).numpy() if noise is None else np.asarray(noise, dtype=np.float32))
-        if self.action_bounds is not None:
-            low, high = self.action_bounds
-            actions = np.maximum(np.minimum(actions, high), low)
-        return actions[0] if single else actions
+        draw = lambda pi: torch.randn(pi.mode().shape).numpy()  # standard normal, from torch's generator
+        return guided_actions(self, raw, guidance, deterministic, noise, mean_null, draw)  # PGG
 
 
 # The methods of Agent that the rest of the project calls, and who calls each (checked when training starts).
@@ -295,18 +271,6 @@ def make_agent(args: dict, shapes: dict) -> Agent:
     return Agent(shapes["obs_dim"], shapes["action_dim"], args["obs_clip"], args.get("null_dims"), bounds)  # PGG
 
 
-def guide(cond, null, guidance):  # PGG
-    """The guided branch (1-γ)·null + γ·cond, the one place it is computed. For torch tensors (updates):
-    torch.lerp(null, cond, γ), one op in place of three with their backward, which computes the same
-    mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit). For numpy arrays
-    (rollouts, `act`, the sweep): that formula in float32, its two weights rounded to float32 from
-    double; `guidance` a number or one per row of `cond`."""
-    if isinstance(cond, torch.Tensor):  # PGG
-        return torch.lerp(null, cond, guidance)  # PGG
-    guidance = np.asarray(guidance, dtype=np.float64)[..., None]  # PGG: a column, for one per row
-    return np.asarray(1.0 - guidance, np.float32) * null + np.asarray(guidance, np.float32) * cond  # PGG
-
-
 def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  # PGG
     """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution: the loss,
     the rollouts' numpy copy (checked against it when training starts) and `act` all take it from here.
@@ -318,72 +282,19 @@ def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  
     return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std)  # PGG
 
 
-class Gaussian:
-    """A diagonal Gaussian over actions, of torch tensors (the loss, the diagnostics) or numpy arrays
-    (rollouts, `act`): `mean` (B, action_dim); `logstd` and `std` = exp(logstd) broadcast against it,
-    `std` passed where the caller computed it (its bits are the caller's exp). The formulas are
-    torch.distributions.Normal's, summed over the action dimensions, written as the tables' runs
-    computed them (tests/test_equivalence.py holds them to Normal's)."""
-
-    def __init__(self, mean, logstd=None, std=None):
-        self.mean, self._logstd, self._std = mean, logstd, std
-
-    @property
-    def logstd(self):
-        if self._logstd is None:
-            self._logstd = torch.log(self._std) if torch.is_tensor(self._std) else np.log(self._std)
-        return self._logstd
-
-    @property
-    def std(self):
-        if self._std is None:
-            self._std = torch.exp(self._logstd) if torch.is_tensor(self._logstd) else np.exp(self._logstd)
-        return self._std
-
-    def mode(self):
-        return self.mean
-
-    def sample(self, noise):
-        """The sample of standard normal `noise` (shaped like the actions)."""
-        return self.mean + self.std * noise
-
-    def sample_log_prob(self, noise):
-        """(sample, its log-probability); log N(mean + σ·noise; mean, σ) is -noise²/2 - log σ - log √(2π)."""
-        return self.sample(noise), (-0.5 * (noise * noise) - self.logstd - LOG_SQRT_2PI).sum(-1)
-
-    def log_prob(self, actions: torch.Tensor) -> torch.Tensor:
-        return (-0.5 * ((actions - self.mean) * torch.exp(-self.logstd)).square() - self.logstd - LOG_SQRT_2PI).sum(-1)
-
-    def entropy(self):
-        return (0.5 + LOG_SQRT_2PI + self.logstd).sum(-1)
-
-    def kl(self, other: "Gaussian"):
-        """KL(self || other), torch. With one σ, ½ Σ ((mean - other.mean)/σ)²."""
-        if self.logstd is other.logstd:
-            return 0.5 * ((self.mean - other.mean) * torch.exp(-other.logstd)).square().sum(-1)
-        return kl_divergence(Normal(self.mean, self.std), Normal(other.mean, other.std)).sum(-1)
-
-    def as_torch(self) -> "Gaussian":
-        return Gaussian(*(torch.from_numpy(np.ascontiguousarray(x)) for x in (self.mean, self.logstd, self.std)))
-
-
 # --- the behaviour policy, in numpy --------------------------------------------------------------
-# On one observation every torch call pays microseconds of dispatch, and these made up most of a
-# rollout step's own time: acting in numpy, with the same float32 arithmetic on views of the agent's
-# weights, made training ~1.3x faster (benchmarks/README.md; agreement: tests/test_equivalence.py).
-# The numpy networks are derived from the modules (pgg_utils.fast.numpy_network), never written here.
+# Torch's per-call dispatch made up most of a rollout step: numpy networks derived from the modules (fast.py) made
+# training ~1.3x faster, with the same float32 arithmetic (benchmarks/README.md; agreement: tests/test_equivalence.py).
 
 
 class RolloutPolicy:
-    """pi_hat and the critic for acting during one rollout, on views of the agent's weights and
-    observation statistics (the weights are fixed until the update): the networks' numpy copies and
-    guided_policy on their outputs (pgg_utils/policy.py). It caches pi(.|null) and σ: build one per rollout."""
+    """pi_hat and the critic for acting during one rollout, on views of the agent's weights (fixed until the update)
+    and observation statistics: the networks' numpy copies and guided_policy on their outputs (pgg_utils/policy.py).
+    It caches pi(.|null) and σ: build one per rollout."""
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor_mean), numpy_network(agent.critic)
-        norm = agent.obs_norm
-        self.obs_mean, self.obs_var, self.obs_count = norm.mean.numpy(), norm.var.numpy(), norm.count.numpy()
-        self.obs_epsilon, self.obs_clip = norm.epsilon, norm.clip
+        self.obs_norm = ObservationStatistics(agent.obs_norm)  # the rollout's observations update it in place
         self.guidance = guidance  # PGG
         self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
@@ -392,15 +303,6 @@ class RolloutPolicy:
         self.null_input = None if agent.null_mask is None else agent.null_input  # PGG: per-row null inputs
         with torch.no_grad():  # PGG
             self.mean_null = agent.unconditional_mean().numpy()  # PGG
-
-    def update_statistics(self, raw_obs: np.ndarray) -> None:
-        """Adds the rows of `raw_obs` to the agent's observation statistics."""
-        update_running_moments(self.obs_mean, self.obs_var, self.obs_count, raw_obs)
-
-    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
-        """Adds `raw_obs` to the agent's observation statistics and returns it normalised by them."""
-        self.update_statistics(raw_obs)
-        return normalise_obs(raw_obs, self.obs_mean, self.obs_var, self.obs_epsilon, self.obs_clip)
 
     def act(self, obs: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs` of normalised observations;
@@ -463,7 +365,7 @@ def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollo
         if "final_info" in infos:  # a sub-env ended an episode; its last step's info and obs are kept here
             # The statistics count the episode's last observation before the next one's first, as
             # CleanRL's NormalizeObservation does (step, then the reset inside it).
-            policy.update_statistics(np.stack(infos["final_obs"][infos["_final_obs"]]))
+            policy.obs_norm.update(np.stack(infos["final_obs"][infos["_final_obs"]]))
             ended = infos["final_info"]
             for i in np.flatnonzero(ended["_episode"]):
                 on_episode(
@@ -472,7 +374,7 @@ def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollo
                     global_step + (step + 1) * len(raw_obs),
                 )
         # Normalised on arrival, with statistics that include it, as CleanRL's wrapper returns it.
-        next_obs = policy.observe(raw_obs)
+        next_obs = policy.obs_norm.observe(raw_obs)
     return next_obs, next_done
 
 
@@ -591,17 +493,9 @@ def flatten_rollout(buf: Rollout, advantages, returns) -> dict[str, torch.Tensor
     }
 
 
-def ppo_update(
-    agent,
-    optimizer,
-    buf: Rollout,
-    advantages,
-    returns,
-    args: Args,
-    guidance,  # PGG
-    loss_fn=minibatch_loss,
-) -> dict[str, float]:
-    """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
+def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_fn=minibatch_loss):  # PGG
+    """PPO's epochs over one rollout (a Rollout); `loss_fn` is `minibatch_loss` or its compiled version. Returns the
+    last minibatch's statistics, the clip fraction and PGG's averaged over every minibatch, as floats."""
     batch = flatten_rollout(buf, advantages, returns)
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.num_minibatches
@@ -662,29 +556,21 @@ def train(args: Args, run: runs.Run) -> None:
         args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
     )
     if len(envs.single_action_space.shape) != 1:
-        envs.close()
         refuse(f"{args.env_id}'s actions have shape {envs.single_action_space.shape}; this script acts with a "
-               "vector (a 1-D Box): reshape them in make_env")  # fmt: skip
+               "vector (a 1-D Box): reshape them in make_env", envs)  # fmt: skip
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
     # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution.
     probe = probe_observations(envs.single_observation_space)
     noise = np.random.default_rng(1).standard_normal((len(probe), action_dim)).astype(np.float32)
     if error := path_error(sys.modules[__name__], agent, args, probe, agent.obs_norm.normalise, noise):
-        envs.close()
-        refuse(error)
+        refuse(error, envs)
     writer = run.open_writer(resumed)
-    # The null embedding trains wherever the objective reads it: guidance or dropout at some iteration,
-    # or any other term of the loss (probed on an empty rollout, with PPO's own actor pass). Outside it,
-    # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
-    # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
+    # The null embedding trains only where the objective reads it: PPO's loss on an empty rollout probes that.
     null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim, action_dim), torch.zeros(2), torch.zeros(2))  # PGG
-    with eval_mode(agent):  # PGG: a BatchNorm's statistics stay where they are
-        null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
-    null_obs = dict(agent.named_parameters()).get("null_obs")  # PGG: none in a network without the null branch
-    trains_null = guided or reads_parameter(null_probe_loss, null_obs)  # PGG
-    trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
+    null_probe_loss = lambda: minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)[0]  # PGG
+    trained = trained_parameters(agent, guided, null_probe_loss)  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
     # One fused kernel for the loss and one for its backward, in place of ~200 small ops.
@@ -757,19 +643,13 @@ def checkpoint_shapes(envs) -> dict:
 
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
-    """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    scripts.require_own(ckpt, ACTION_SPACE, __file__, source)
-    checkpoints.require_finite(ckpt, source)
-    low, high = checkpoints.action_bounds(ckpt)
-    agent = make_agent(ckpt["args"], {**ckpt, "action_low": low, "action_high": high})
-    agent.load_state_dict(ckpt["model"])
-    return agent.eval()
+    """The agent, in eval mode, of a loaded checkpoint dict (of any readable format), by this script's make_agent."""
+    return loading.agent_from_checkpoint(sys.modules[__name__], ckpt, source)
 
 
 def load_checkpoint(path) -> tuple[Agent, dict]:
-    """(agent in eval mode, normalisation statistics included; the checkpoint dict) from a file."""
-    ckpt = checkpoints.read_checkpoint_file(path)
-    return agent_from_checkpoint(ckpt, path), ckpt
+    """(agent in eval mode, the checkpoint dict) from a checkpoint file, by this script's make_agent."""
+    return loading.load_checkpoint(sys.modules[__name__], path)
 
 
 def main() -> None:

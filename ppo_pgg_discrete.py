@@ -34,26 +34,22 @@ import torch
 import tyro
 from torch import nn
 
-from pgg_utils import checkpoints, runs, scripts, spaces, training_state
-from pgg_utils.arguments import RunArgs, acting_error, answer_cleanrl_habits
-from pgg_utils.fast import (
-    evaluation_forward,
-    flatten_parameters,
-    numpy_network,
-    standard_gumbel,
-)
-from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, reads_parameter, uses_null_branch  # PGG
+from pgg_utils import loading, runs, spaces, training_state
+from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
+from pgg_utils.distributions import Categorical, guide, gumbel_noise  # PGG: guide, the mix of the branches' logits
+from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network, standard_gumbel
+from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.policy import (
     branch_pass,
     eval_mode,
     frozen,
-    guidance_none_error,  # PGG
+    guided_actions,  # PGG
     null_pass,  # PGG
     numpy_policy,
-    observation_error,
     path_error,
     probe_observations,
     refuse,
+    trained_parameters,
 )
 
 ACTION_SPACE = "discrete"  # the checkpoints' kind; the sweep picks this script by it
@@ -200,26 +196,12 @@ class Agent(nn.Module):
 
     @torch.no_grad()
     def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:  # PGG
-        """Actions of the guided policy pi_hat at `guidance` (a number, or one per row) for observations
-        (one, or a batch): sampled by the Gumbel-max trick with standard Gumbel `noise` shaped like the
-        logits (drawn from torch's generator if None), or the mode if `deterministic`. `logits_null`:
-        the unconditional branch where the caller holds it (the sweep computes it once, or takes zeros
-        for its uniform-null control). The sweep acts through this method. ValueError, one line, for an
-        observation of another shape than training's, a guidance outside training's rule ([0, 1000]) or
-        an observation holding a NaN or an infinity."""
-        obs = np.asarray(obs, dtype=np.float32)
-        if error := observation_error(obs, self.obs_shape) or guidance_none_error(guidance):  # PGG
-            raise ValueError(error)
-        guidance = np.asarray(guidance, dtype=np.float64)  # PGG
-        if error := acting_error(obs, guidance):  # PGG: training's and the sweep's guidance rule
-            raise ValueError(error)
-        single = obs.ndim == 1
-        pi = self.acting_policy(obs[None] if single else obs, guidance, logits_null)  # PGG
-        if deterministic:
-            actions = pi.mode()
-        else:
-            actions = pi.sample(gumbel_noise(*pi.logits.shape) if noise is None else np.asarray(noise, np.float32))
-        return actions[0] if single else actions
+        """Actions of pi_hat at `guidance` (a number, or one per row) for observations (one, or a batch), as the sweep
+        acts: Gumbel-max samples with standard Gumbel `noise` shaped like the logits (torch's generator's if None), or
+        the mode if `deterministic`; `logits_null` where the caller holds it (the sweep: once, or zeros for its
+        uniform-null control). ValueError, one line, for an input training would refuse (policy.guided_actions)."""
+        obs, draw = np.asarray(obs, dtype=np.float32), lambda pi: gumbel_noise(*pi.logits.shape)
+        return guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw)  # PGG
 
 
 # The methods of Agent that the rest of the project calls, and who calls each (checked when training starts).
@@ -240,18 +222,6 @@ def make_agent(args: dict, shapes: dict) -> Agent:
     return Agent(shapes["obs_dim"], shapes["n_actions"])
 
 
-def guide(cond, null, guidance):  # PGG
-    """The guided branch (1-γ)·null + γ·cond, the one place it is computed. For torch tensors (updates):
-    torch.lerp(null, cond, γ), one op in place of three with their backward, which computes the same
-    mixture as cond - (1-γ)·(cond - null) for γ >= 0.5 (the same up to the last bit). For numpy arrays
-    (rollouts, `act`, the sweep): that formula in float32, its two weights rounded to float32 from
-    double; `guidance` a number or one per row of `cond`."""
-    if isinstance(cond, torch.Tensor):  # PGG
-        return torch.lerp(null, cond, guidance)  # PGG
-    guidance = np.asarray(guidance, dtype=np.float64)[..., None]  # PGG: a column, for one per row
-    return np.asarray(1.0 - guidance, np.float32) * null + np.asarray(guidance, np.float32) * cond  # PGG
-
-
 def guided_policy(cond: "Categorical", null: "Categorical", guidance) -> "Categorical":  # PGG
     """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution: the loss,
     the rollouts' numpy copy (checked against it when training starts) and `act` all take it from here.
@@ -261,60 +231,9 @@ def guided_policy(cond: "Categorical", null: "Categorical", guidance) -> "Catego
     return Categorical(guide(cond.logits, null.logits, guidance))  # PGG
 
 
-class Categorical:
-    """A categorical distribution over actions from `logits` (..., n_actions), of torch tensors (the loss,
-    the diagnostics) or numpy arrays (rollouts, `act`), with the arithmetic the tables' runs used
-    (tests/test_equivalence.py holds it to torch.distributions.Categorical). Its log-softmax is computed
-    once: the loss's log-probabilities and entropy share one node of the graph. Samples by the Gumbel-max
-    trick: argmax(logits + standard Gumbel noise)."""
-
-    def __init__(self, logits):
-        self.logits, self._log_softmax = logits, None
-
-    @property
-    def log_softmax(self) -> torch.Tensor:
-        if self._log_softmax is None:
-            self._log_softmax = self.logits.log_softmax(-1)
-        return self._log_softmax
-
-    def mode(self):
-        return self.logits.argmax(-1)
-
-    def sample(self, gumbel):
-        return (self.logits + gumbel).argmax(-1)
-
-    def sample_log_prob(self, gumbel):
-        actions = self.sample(gumbel)
-        return actions, self.log_prob(actions)
-
-    def log_prob(self, actions):
-        if torch.is_tensor(self.logits):
-            return self.log_softmax.gather(-1, actions.unsqueeze(-1)).squeeze(-1)
-        # In numpy, the log-softmax of the given actions only: a third of the cost of the full one.
-        shifted = self.logits - self.logits.max(-1, keepdims=True)
-        return shifted[np.arange(len(actions)), actions] - np.log(np.exp(shifted).sum(-1))
-
-    def entropy(self) -> torch.Tensor:
-        return -(self.log_softmax.exp() * self.log_softmax).sum(-1)
-
-    def kl(self, other: "Categorical") -> torch.Tensor:
-        """KL(self || other), torch."""
-        return (self.log_softmax.exp() * (self.log_softmax - other.log_softmax)).sum(-1)
-
-    def as_torch(self) -> "Categorical":
-        return Categorical(torch.from_numpy(np.ascontiguousarray(self.logits)))
-
-
-def gumbel_noise(*shape: int) -> np.ndarray:
-    """Standard Gumbel noise, float32, from torch's generator (Gumbel-max sampling: fast.standard_gumbel)."""
-    return standard_gumbel(torch.rand(*shape).numpy())
-
-
 # --- the behaviour policy, in numpy --------------------------------------------------------------
-# On a batch of a few observations every torch call pays microseconds of dispatch, and these made up
-# most of a rollout step: acting in numpy, with the same float32 arithmetic on views of the agent's
-# weights, made training ~1.3x faster (benchmarks/README.md; agreement: tests/test_equivalence.py).
-# The numpy networks are derived from the modules (pgg_utils.fast.numpy_network), never written here.
+# Torch's per-call dispatch made up most of a rollout step: numpy networks derived from the modules (fast.py) made
+# training ~1.3x faster, with the same float32 arithmetic (benchmarks/README.md; agreement: tests/test_equivalence.py).
 
 
 class RolloutPolicy:
@@ -509,17 +428,9 @@ def flatten_rollout(buf: Rollout, advantages, returns) -> dict[str, torch.Tensor
     }
 
 
-def ppo_update(
-    agent,
-    optimizer,
-    buf: Rollout,
-    advantages,
-    returns,
-    args: Args,
-    guidance,  # PGG
-    loss_fn=minibatch_loss,
-) -> dict[str, float]:
-    """PPO's epochs over one rollout; `loss_fn` is `minibatch_loss` or its compiled version."""
+def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_fn=minibatch_loss):  # PGG
+    """PPO's epochs over one rollout (a Rollout); `loss_fn` is `minibatch_loss` or its compiled version. Returns the
+    last minibatch's statistics, the clip fraction and PGG's averaged over every minibatch, as floats."""
     batch = flatten_rollout(buf, advantages, returns)
     batch_size = len(batch["obs"])
     minibatch_size = batch_size // args.num_minibatches
@@ -578,29 +489,21 @@ def train(args: Args, run: runs.Run) -> None:
 
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
     if (start := int(envs.single_action_space.start)) != 0:
-        envs.close()
         refuse(f"{args.env_id}'s actions start at {start}; this script acts with 0..n-1: shift them in make_env "
-               "(gymnasium.wrappers.TransformAction) or start the space at 0")  # fmt: skip
+               "(gymnasium.wrappers.TransformAction) or start the space at 0", envs)  # fmt: skip
     obs_dim = envs.single_observation_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
     # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution.
     probe = probe_observations(envs.single_observation_space)
     gumbel = standard_gumbel(np.random.default_rng(1).random((len(probe), envs.single_action_space.n), np.float32))
     if error := path_error(sys.modules[__name__], agent, args, probe, lambda raw: raw.astype(np.float32), gumbel):
-        envs.close()
-        refuse(error)
+        refuse(error, envs)
     writer = run.open_writer(resumed)
-    # The null embedding trains wherever the objective reads it: guidance or dropout at some iteration,
-    # or any other term of the loss (probed on an empty rollout, with PPO's own actor pass). Outside it,
-    # its all-zero gradient in the flat buffer would still change the clipping norm's rounding: without
-    # it the run is PPO's bits.
     guided = uses_null_branch(args)  # PGG
+    # The null embedding trains only where the objective reads it: PPO's loss on an empty rollout probes that.
     null_probe = flatten_rollout(Rollout.empty(2, 1, obs_dim), torch.zeros(2), torch.zeros(2))  # PGG
-    with eval_mode(agent):  # PGG: a BatchNorm's statistics stay where they are
-        null_probe_loss, _ = minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)  # PGG
-    null_obs = dict(agent.named_parameters()).get("null_obs")  # PGG: none in a network without the null branch
-    trains_null = guided or reads_parameter(null_probe_loss, null_obs)  # PGG
-    trained = [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]  # PGG
+    null_probe_loss = lambda: minibatch_loss(agent, null_probe, torch.arange(2), None, None, args)[0]  # PGG
+    trained = trained_parameters(agent, guided, null_probe_loss)  # PGG
     # Fused Adam on one flat tensor: CleanRL's per-tensor Adam costs more than our forward pass.
     optimizer = torch.optim.Adam([flatten_parameters(trained)], lr=args.learning_rate, eps=1e-5, fused=True)
     # One fused kernel for the loss and one for its backward, in place of ~200 small ops.
@@ -669,18 +572,13 @@ def checkpoint_shapes(envs) -> dict:
 
 
 def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
-    """The agent, in eval mode, of a loaded checkpoint dict (of any readable format)."""
-    scripts.require_own(ckpt, ACTION_SPACE, __file__, source)
-    checkpoints.require_finite(ckpt, source)
-    agent = make_agent(ckpt["args"], ckpt)
-    agent.load_state_dict(ckpt["model"])
-    return agent.eval()
+    """The agent, in eval mode, of a loaded checkpoint dict (of any readable format), by this script's make_agent."""
+    return loading.agent_from_checkpoint(sys.modules[__name__], ckpt, source)
 
 
 def load_checkpoint(path) -> tuple[Agent, dict]:
-    """(agent in eval mode, the checkpoint dict) from a checkpoint file."""
-    ckpt = checkpoints.read_checkpoint_file(path)
-    return agent_from_checkpoint(ckpt, path), ckpt
+    """(agent in eval mode, the checkpoint dict) from a checkpoint file, by this script's make_agent."""
+    return loading.load_checkpoint(sys.modules[__name__], path)
 
 
 def main() -> None:

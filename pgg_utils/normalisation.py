@@ -73,10 +73,32 @@ class RunningObsNorm(nn.Module):
     def normalise(self, raw_obs) -> np.ndarray:
         return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
 
-    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
-        """Adds `raw_obs` to the statistics and returns it normalised by them (as RolloutPolicy.observe)."""
+    def update(self, raw_obs: np.ndarray) -> None:
+        """Adds the rows of `raw_obs` to the statistics, in place."""
         update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), raw_obs)
+
+    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
+        """Adds `raw_obs` to the statistics and returns it normalised by them."""
+        self.update(raw_obs)
         return self.normalise(raw_obs)
 
     def forward(self, raw_obs) -> torch.Tensor:
         return torch.from_numpy(self.normalise(raw_obs))
+
+
+class ObservationStatistics:
+    """Numpy views of a RunningObsNorm's statistics, for the rollouts' updates step by step: a buffer's `.numpy()` on
+    every call cost as much as the update itself. Build one per rollout (the views follow load_state_dict's copies)."""
+
+    def __init__(self, norm: RunningObsNorm):
+        self.mean, self.var, self.count = norm.mean.numpy(), norm.var.numpy(), norm.count.numpy()
+        self.epsilon, self.clip = norm.epsilon, norm.clip
+
+    def update(self, raw_obs: np.ndarray) -> None:
+        """Adds the rows of `raw_obs` to the statistics, in place."""
+        update_running_moments(self.mean, self.var, self.count, raw_obs)
+
+    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
+        """Adds `raw_obs` to the statistics and returns it normalised by them."""
+        self.update(raw_obs)
+        return normalise_obs(raw_obs, self.mean, self.var, self.epsilon, self.clip)

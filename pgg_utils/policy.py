@@ -9,7 +9,9 @@ the loss, the rollouts' numpy copy and `Agent.act` all call it. This module hold
   one line naming it;
 - the null branch of an actor whose training mode couples rows or moves statistics (BatchNorm) or draws noise
   (Dropout): computed on its own, in eval mode (`branch_pass`, `null_pass`), so it needs no batch and moves nothing;
-- `missing_methods`: the methods of `Agent` that the rest of the project calls."""
+- `missing_methods`: the methods of `Agent` that the rest of the project calls;
+- `guided_actions`, `Agent.act`'s body (its input checks, sampling, clipping), and `trained_parameters`, whether the
+  null embedding trains."""
 
 import sys
 from contextlib import contextmanager, nullcontext
@@ -17,6 +19,9 @@ from contextlib import contextmanager, nullcontext
 import numpy as np
 import torch
 from torch import nn
+
+from pgg_utils.arguments import acting_error
+from pgg_utils.guidance import reads_parameter
 
 # The γ of the start-up probe: not 1, where the null branch drops out of the guided policy.
 PROBE_GUIDANCE = 1.3
@@ -28,8 +33,10 @@ PROBE_MAX_KL = 1e-7
 MODE_DEPENDENT = (nn.modules.batchnorm._BatchNorm, nn.modules.dropout._DropoutNd)
 
 
-def refuse(error: str) -> None:
-    """Stops training before it starts: one line, exit 2."""
+def refuse(error: str, envs=None) -> None:
+    """Stops training before it starts: one line, exit 2; `envs` closed first."""
+    if envs is not None:
+        envs.close()
     print(f"error: {error}", file=sys.stderr)
     sys.exit(2)
 
@@ -205,5 +212,45 @@ def observation_error(obs: np.ndarray, shape: tuple) -> str | None:
     return None
 
 
-def guidance_none_error(guidance) -> str | None:
-    return "guidance must be a number in [0, 1000], got None" if guidance is None else None
+def acting_guidance(obs: np.ndarray, shape: tuple, guidance) -> np.ndarray:
+    """`act`'s checks of its input, training's and the sweep's rule: a ValueError, one line, for an observation not
+    of the agent's `shape` (one, or a batch), a guidance outside [0, 1000] or an observation holding a NaN or an
+    infinity. Returns `guidance` as float64, a number or one per row."""
+    if error := observation_error(obs, shape):
+        raise ValueError(error)
+    if guidance is None:
+        raise ValueError("guidance must be a number in [0, 1000], got None")
+    guidance = np.asarray(guidance, dtype=np.float64)
+    if error := acting_error(obs, guidance):
+        raise ValueError(error)
+    return guidance
+
+
+def guided_actions(agent, obs: np.ndarray, guidance, deterministic: bool, noise, null, draw_noise) -> np.ndarray:
+    """`Agent.act` of both scripts, from its `acting_policy`: the actions of one observation or a batch (of the
+    agent's `obs_shape`, checked by acting_guidance) at `guidance`, the mode if `deterministic`, else sampled with
+    `noise` (drawn by `draw_noise(distribution)` if None), clipped to the agent's `action_bounds` (low, high) where
+    it has them; `null` the unconditional branch where the caller holds it."""
+    guidance = acting_guidance(obs, agent.obs_shape, guidance)
+    single = obs.ndim == 1
+    pi = agent.acting_policy(obs[None] if single else obs, guidance, null)
+    if deterministic:
+        actions = pi.mode()
+    else:
+        actions = pi.sample(draw_noise(pi) if noise is None else np.asarray(noise, dtype=np.float32))
+    if (bounds := getattr(agent, "action_bounds", None)) is not None:
+        low, high = bounds
+        actions = np.maximum(np.minimum(actions, high), low)
+    return actions[0] if single else actions
+
+
+def trained_parameters(agent, guided: bool, probe_loss) -> list:
+    """The parameters the optimizer trains. The null embedding trains wherever the objective reads it: guidance or
+    dropout at some iteration (`guided`), or any other term of the loss (`probe_loss()`: the loss on an empty rollout
+    with PPO's own actor pass, in eval mode so that a BatchNorm's statistics stay). Outside it, its all-zero gradient
+    in the flat buffer would still change the clipping norm's rounding: without it the run is PPO's bits."""
+    with eval_mode(agent):
+        null_probe_loss = probe_loss()
+    null_obs = dict(agent.named_parameters()).get("null_obs")  # none in a network without the null embedding
+    trains_null = guided or reads_parameter(null_probe_loss, null_obs)
+    return [p for name, p in agent.named_parameters() if trains_null or name != "null_obs"]

@@ -150,7 +150,7 @@ def test_episodes_are_reported_with_raw_returns_at_the_step_they_end():
     torch.manual_seed(0)
     policy, episodes = pgg.RolloutPolicy(pgg.Agent(4, 1), 1.0), []
     _, next_done = pgg.collect_rollout(
-        policy, envs, policy.observe(obs), np.zeros(1, np.float32), buf,
+        policy, envs, policy.obs_norm.observe(obs), np.zeros(1, np.float32), buf,
         lambda r, l, step: episodes.append((r, l, step)), global_step=4096,
     )  # fmt: skip
     returns, lengths, steps = map(np.array, zip(*episodes))
@@ -177,7 +177,7 @@ def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
     buf = pgg.Rollout.empty(400, 1, 11, 3)
     raw_obs, _ = envs.reset(seed=3)
     _next_obs, _next_done = pgg.collect_rollout(
-        policy, envs, policy.observe(raw_obs), np.zeros(1, np.float32), buf, lambda *_: None, 0
+        policy, envs, policy.obs_norm.observe(raw_obs), np.zeros(1, np.float32), buf, lambda *_: None, 0
     )
 
     def cleanrl_wrapper():
@@ -208,7 +208,7 @@ def test_observation_statistics_match_gymnasium_bit_for_bit(rows):
     reference = gym.wrappers.utils.RunningMeanStd(shape=(3,))
     for _ in range(5):
         batch = rng.normal(size=(rows, 3)) * 5 + 2
-        pgg.update_running_moments(norm.mean.numpy(), norm.var.numpy(), norm.count.numpy(), batch)
+        norm.update(batch)
         reference.update(batch)
     np.testing.assert_array_equal(norm.mean.numpy(), reference.mean)
     np.testing.assert_array_equal(norm.var.numpy(), reference.var)
@@ -275,7 +275,7 @@ def test_paper_task_steps_through_env_factory(env_id):
     policy = pgg.RolloutPolicy(agent, 1.1)
     buf = pgg.Rollout.empty(300, 2, obs.shape[1], envs.single_action_space.shape[0])
     _, next_done = pgg.collect_rollout(
-        policy, envs, policy.observe(obs), np.zeros(2, np.float32), buf, lambda *_: None, 0
+        policy, envs, policy.obs_norm.observe(obs), np.zeros(2, np.float32), buf, lambda *_: None, 0
     )
     assert torch.isfinite(buf.obs).all() and buf.rewards.abs().max() <= 10.0
     # First observations, one per step and sub-env, and each episode's last one.

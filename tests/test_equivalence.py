@@ -95,7 +95,7 @@ def test_numpy_rollout_policy_matches_agent(guidance):
         cagent.null_obs.normal_()
         cagent.actor_logstd.fill_(-1.0)
         policy = continuous.RolloutPolicy(cagent, guidance)
-        obs = policy.observe(raw)
+        obs = policy.obs_norm.observe(raw)
         actions, logprobs, values = policy.act(obs, noise)
         pi = cagent.policy(torch.from_numpy(obs), guidance)
         torch.testing.assert_close(torch.from_numpy(actions), pi.sample(torch.from_numpy(noise)))

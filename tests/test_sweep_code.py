@@ -92,13 +92,13 @@ def test_a_per_episode_column_with_a_name_of_the_sweeps_is_refused_in_one_line(t
 
 
 def test_an_edit_to_a_project_module_that_act_calls_re_evaluates_the_cells(tmp_path):
-    """In a copy of the project: a rerun reuses every cell; after an edit to the module of acting_error
+    """In a copy of the project: a rerun reuses every cell; after an edit to the module of guided_actions
     (which Agent.act calls, and the sweep imports nowhere itself), a rerun evaluates every cell again."""
     project = tmp_path / "project"
     shutil.copytree(ROOT / "pgg_utils", project / "pgg_utils", ignore=shutil.ignore_patterns("__pycache__"))
     for script in ("eval_gamma_sweep.py", "ppo_pgg_discrete.py", "ppo_pgg_continuous.py"):
         shutil.copy(ROOT / script, project / script)
-    acted_with = Path(inspect.getsourcefile(ppo_pgg_discrete.acting_error)).relative_to(ROOT)
+    acted_with = Path(inspect.getsourcefile(ppo_pgg_discrete.guided_actions)).relative_to(ROOT)
     assert acted_with.parts[0] == "pgg_utils"
 
     def sweep_in_copy() -> str:
