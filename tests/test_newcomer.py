@@ -118,7 +118,7 @@ def test_runs_trained_with_other_arguments_are_refused_and_never_swept(tmp_path,
     )
     swept = {line.split(",")[3] for line in (tmp_path / "second" / "episodes.csv").read_text().splitlines()[1:]}
     assert swept == {"CartPole-v1__ppo__s2"}
-    assert "**1k Steps**" in (tmp_path / "second" / "table_discrete.md").read_text()
+    assert "**1,024 Steps**" in (tmp_path / "second" / "table_discrete.md").read_text()
 
 
 # --- 4. two launchers on one root -----------------------------------------------------------------------
