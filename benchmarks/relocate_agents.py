@@ -36,7 +36,7 @@ REWRITTEN = ("args.output_dir", "run")
 
 @dataclass
 class Args:
-    folders: tuple[str, ...]
+    folders: tyro.conf.Positional[tuple[str, ...]]
     """folders holding shipped agents (`<run>/checkpoints/step_*.pt`), searched recursively"""
     check: bool = False
     """compare with git HEAD only; rewrite nothing"""

@@ -437,3 +437,16 @@ def test_a_task_whose_rng_is_a_legacy_random_state_is_saved_and_restored(tmp_pat
         ppo_pgg_discrete, small_args("discrete", tmp_path, env_id="LegacyRandomTask-v0", run_name="legacy", resume=True)
     )
     assert checkpoints.checkpoint_path(run_dir, 1536).exists()
+
+
+def test_shipped_agents_name_no_folder_of_the_machine_that_trained_them():
+    """Every committed agent records its output folder relative to its run and its run's name
+    (benchmarks/relocate_agents.py rewrote those two fields, every tensor unchanged); before, each held
+    the training machine's absolute output folder."""
+    from pgg_utils.checkpoints import read_checkpoint_file
+
+    paths = sorted((ROOT / "results").rglob("checkpoints/step_*.pt"))
+    assert len(paths) > 1000
+    for path in paths:
+        ckpt = read_checkpoint_file(path)
+        assert (ckpt["args"]["output_dir"], ckpt["run"]) == ("..", path.parent.parent.name), path
