@@ -96,6 +96,20 @@ def test_a_fork_that_mixes_sigma_per_branch_in_the_one_place_trains_and_acts_as_
     # with the original's shared-σ mean mix the same weights act otherwise
     shared = ppo_pgg_continuous.Gaussian(agent.policy(agent.obs_norm(raw), 2.0).mean)
     assert not np.allclose(replayed_actions(agent, raw, 2.0, noise), np.clip(shared.mean.detach().numpy(), -0.4, 0.4))
+    # the sweep's episodes are the replayed policy's: the same task steps, actions and noise, apart from its code
+    guided = sweep.GuidedPolicy(agent, ckpt, module=module)
+    swept = sweep.evaluate_cell(guided, ckpt, 2.0, 2, 10_000, False)["return"]
+    for episode, swept_return in enumerate(swept):
+        env = module.make_env(ckpt["env_id"])()
+        horizon, size = sweep.horizon_and_action_size(env, ckpt)
+        episode_noise = sweep.episode_noise("continuous", 10_000, episode, horizon, size)
+        obs, _ = env.reset(seed=10_000 + episode)
+        total, done, t = 0.0, False, 0
+        while not done:
+            action = replayed_actions(agent, obs[None], 2.0, episode_noise[t : t + 1])[0]
+            obs, reward, terminated, truncated, _ = env.step(action)
+            total, done, t = total + float(reward), terminated or truncated, t + 1
+        assert swept_return == pytest.approx(total, rel=1e-4), episode
 
 
 # --- a fork that edits one path alone stops before training -------------------------------------------
@@ -184,6 +198,12 @@ def test_an_actor_with_batch_norm_trains_with_and_without_guidance(kind, guidanc
     assert isinstance(norm, nn.BatchNorm1d) and norm.num_batches_tracked > 0  # the updates trained it
     raw = np.random.default_rng(0).normal(size=(1, ckpt["obs_dim"]))
     assert np.isfinite(np.asarray(agent.act(raw, 1.5), dtype=np.float64)).all()  # one row acts
+    swept = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 2, 10_000, False)
+    assert np.isfinite(swept["return"]).all() and (swept["length"] > 0).all()  # the sweep's batched episodes
+    running = norm.running_mean.clone()
+    sweep.play_episode(module.make_env(ckpt["env_id"])(), sweep.GuidedPolicy(agent, ckpt, module=module), ckpt,
+                       1.5, 10_000, 0, False)  # fmt: skip
+    assert torch.equal(norm.running_mean, running)  # evaluation moves no statistics
 
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
