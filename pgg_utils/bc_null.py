@@ -136,7 +136,10 @@ def fitted_checkpoint(path: Path, ckpt: dict, args: Args, given: tuple[Path, ...
            "fit_steps": args.fit_steps, "learning_rate": args.learning_rate, "nll": nll,
            "reach": reach(agent, ckpt["action_space"], null, actions),
            "source": f"{run_of(ckpt, path)}/checkpoints/{Path(path).name}",
-           "source_null_norm": float(ckpt["model"]["null_obs"].norm())}  # fmt: skip
+           "source_null_norm": float(ckpt["model"]["null_obs"].norm()),
+           # the code, machine and stack that fitted it (`code` names the training's)
+           "code": scripts.code_revision(Path(__file__)), "machine": checkpoints.machine(),
+           "versions": checkpoints.package_versions()}  # fmt: skip
     agent = {key: value for key, value in ckpt.items() if key != "resume"}  # an agent to evaluate, not to resume
     return {**agent, "run": run, "model": {**ckpt["model"], "null_obs": null}, "null_fit": fit}
 

@@ -6,12 +6,12 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from conftest import small_args, train
+from conftest import ROOT, small_args, train
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import bc_null, checkpoints, files, identity
+from pgg_utils import bc_null, checkpoints, files, identity, scripts
 
 
 def test_the_fit_moves_only_the_null_embedding_to_the_actions_maximum_likelihood():
@@ -45,6 +45,11 @@ def test_a_fitted_null_is_swept_as_its_own_configuration_beside_its_source(tmp_p
     args = bc_null.Args(paths=(str(source),), output=str(tmp_path / "runs" / "bc"), episodes=3)
     fitted = bc_null.fitted_checkpoint(source, checkpoints.read_checkpoint_file(source), args, (), "fitted__bcnull")
     assert fitted["null_fit"]["method"] == "behaviour cloning" and fitted["null_fit"]["episodes"] == 3
+    fitter = fitted["null_fit"]["code"]  # the code that fitted it, beside the training's own `code`
+    assert fitter["files"][0] == "bc_null.py" and fitter["script_sha1"] == scripts.file_sha1(
+        ROOT / "pgg_utils" / "bc_null.py"
+    )
+    assert fitted["null_fit"]["machine"] and fitted["null_fit"]["versions"]["torch"] == torch.__version__
     assert not torch.equal(fitted["model"]["null_obs"], checkpoints.read_checkpoint_file(source)["model"]["null_obs"])
     assert identity.config_label(fitted).endswith("null=bc num_steps=64 total_timesteps=1536")
     destination = tmp_path / "runs" / "bc" / "fitted__bcnull" / "checkpoints" / source.name
