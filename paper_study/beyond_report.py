@@ -784,19 +784,7 @@ def cloning_section(tests: list[dict], fresh_tests: list[dict], values_out: list
               f"{', '.join(sorted({t['env_id'] for t in tests}))}; its held-out γ is in the task's section."), "",
              ("| task | baseline | best γ (baseline's) | fall | baseline's fall | difference | p (Holm) | detectable | "
               "return | baseline's return | p (Holm) |"), "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for t in tests:
-        for quantity, value in (("fall (%)", 100 * t["fall"]), ("baseline's fall (%)", 100 * t["baseline_fall"]),
-                                ("fall difference (pts)", 100 * (t["fall"] - t["baseline_fall"])),
-                                ("fall p", t["p"]), ("fall p Holm", t["p_holm"]),
-                                ("fall detectable (pts)", 100 * t["detectable"]), ("return at best γ", t["return"]),
-                                ("baseline's return at its best γ", t["baseline_return"]),
-                                ("return at best γ p", t["return_p"]), ("return at best γ p Holm", t["return_p_holm"])):  # fmt: skip
-            record(values_out, t["env_id"], t["variant"], t["baseline"], quantity, value)
-        lines.append(f"| {t['env_id']} | {paper_name(t['baseline'])} | {t['best']:g} ({t['baseline_best']:g}) | "
-                     f"{pct(t['fall'])} | {pct(t['baseline_fall'])} | {points(t['fall'] - t['baseline_fall'])} | "
-                     f"{fmt_p(t['p'])} ({fmt_p(t['p_holm'])}) | {points(t['detectable'], sign=False)} | "
-                     f"{fmt(t['return'])} | {fmt(t['baseline_return'])} | {fmt_p(t['return_p'])} "
-                     f"({fmt_p(t['return_p_holm'])}) |")  # fmt: skip
+    lines += cloning_rows(tests, SWEEP_QUANTITIES, values_out)
     if fresh_tests:
         lines += ["", ("The best γ above is chosen on the episodes its fall is measured on, which inflates each side's "
                        "return there and so its fall, not by the same amount on both sides. The same tests with the choice and "
@@ -806,22 +794,34 @@ def cloning_section(tests: list[dict], fresh_tests: list[dict], values_out: list
                        f"{len(fresh_tests)} tests of each kind. These are the tests the verdict rests on."), "",
                   ("| task | baseline | best γ (baseline's) | fresh fall | baseline's | difference | p (Holm) | "
                    "detectable | fresh return | baseline's | p (Holm) |"), "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        for t in fresh_tests:
-            for quantity, value in (("fresh fall (%)", 100 * t["fall"]),
-                                    ("baseline's fresh fall (%)", 100 * t["baseline_fall"]),
-                                    ("fresh fall difference (pts)", 100 * (t["fall"] - t["baseline_fall"])),
-                                    ("fresh fall p", t["p"]), ("fresh fall p Holm", t["p_holm"]),
-                                    ("fresh fall detectable (pts)", 100 * t["detectable"]),
-                                    ("fresh return at best γ", t["return"]),
-                                    ("baseline's fresh return at its best γ", t["baseline_return"]),
-                                    ("fresh return p", t["return_p"]), ("fresh return p Holm", t["return_p_holm"])):  # fmt: skip
-                record(values_out, t["env_id"], t["variant"], t["baseline"], quantity, value)
-            lines.append(f"| {t['env_id']} | {paper_name(t['baseline'])} | {t['best']:g} ({t['baseline_best']:g}) | "
-                         f"{pct(t['fall'])} | {pct(t['baseline_fall'])} | {points(t['fall'] - t['baseline_fall'])} | "
-                         f"{fmt_p(t['p'])} ({fmt_p(t['p_holm'])}) | {points(t['detectable'], sign=False)} | "
-                         f"{fmt(t['return'])} | {fmt(t['baseline_return'])} | {fmt_p(t['return_p'])} "
-                         f"({fmt_p(t['return_p_holm'])}) |")  # fmt: skip
+        lines += cloning_rows(fresh_tests, FRESH_QUANTITIES, values_out)
     return [*lines, ""]
+
+
+# The quantities of a cloning test recorded in report_values.csv, in the order of cloning_rows' values.
+SWEEP_QUANTITIES = ("fall (%)", "baseline's fall (%)", "fall difference (pts)", "fall p", "fall p Holm",
+                    "fall detectable (pts)", "return at best γ", "baseline's return at its best γ",
+                    "return at best γ p", "return at best γ p Holm")  # fmt: skip
+FRESH_QUANTITIES = ("fresh fall (%)", "baseline's fresh fall (%)", "fresh fall difference (pts)", "fresh fall p",
+                    "fresh fall p Holm", "fresh fall detectable (pts)", "fresh return at best γ",
+                    "baseline's fresh return at its best γ", "fresh return p", "fresh return p Holm")  # fmt: skip
+
+
+def cloning_rows(tests: list[dict], quantities: tuple[str, ...], values_out: list) -> list[str]:
+    """A table row per cloning test, its unrounded values recorded under `quantities`."""
+    rows = []
+    for t in tests:
+        values = (100 * t["fall"], 100 * t["baseline_fall"], 100 * (t["fall"] - t["baseline_fall"]), t["p"],
+                  t["p_holm"], 100 * t["detectable"], t["return"], t["baseline_return"], t["return_p"],
+                  t["return_p_holm"])  # fmt: skip
+        for quantity, value in zip(quantities, values, strict=True):
+            record(values_out, t["env_id"], t["variant"], t["baseline"], quantity, value)
+        rows.append(f"| {t['env_id']} | {paper_name(t['baseline'])} | {t['best']:g} ({t['baseline_best']:g}) | "
+                    f"{pct(t['fall'])} | {pct(t['baseline_fall'])} | {points(t['fall'] - t['baseline_fall'])} | "
+                    f"{fmt_p(t['p'])} ({fmt_p(t['p_holm'])}) | {points(t['detectable'], sign=False)} | "
+                    f"{fmt(t['return'])} | {fmt(t['baseline_return'])} | {fmt_p(t['return_p'])} "
+                    f"({fmt_p(t['return_p_holm'])}) |")  # fmt: skip
+    return rows
 
 
 def question_3_reading(values_out: list[dict]) -> list[str]:
