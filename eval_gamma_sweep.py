@@ -112,7 +112,7 @@ from pgg_utils.files import (
     write_csv_atomic,
     write_record,
 )
-from pgg_utils.identity import configuration, configuration_fields, run_of
+from pgg_utils.identity import Configuration, configuration, configuration_fields, run_of
 from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95, seed_means
 from pgg_utils.processes import die_with_parent
 from pgg_utils.progress import Progress, format_duration
@@ -705,9 +705,8 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
         try:
             digest, ckpt = read_checkpoint(checkpoint)
             evaluation = evaluation_of(checkpoint, ckpt, given, tasks)
-            fields = configuration_fields(ckpt)
-            identity = (ckpt["env_id"], fields["config"], fields["train_guidance"], fields["cond_dropout"],
-                        ckpt["args"]["seed"], ckpt["step_mark"])  # fmt: skip
+            config = Configuration.of_checkpoint(ckpt)
+            identity = (*config.key, ckpt["args"]["seed"], ckpt["step_mark"])  # its pooling key, seed and step
             kind = ckpt["action_space"]
         except ValueError as e:  # unreadable, not a checkpoint of these scripts, non-finite, no script or task
             skipped.append(f"{checkpoint}: {e}")
@@ -721,10 +720,11 @@ def plan(args: Args, checkpoints: list[Path], output: Path, stack: tuple, skippe
         other = experiments.setdefault(identity, checkpoint)
         if other != checkpoint:
             raise InputError(
-                f"{other} and {checkpoint} are two runs of one experiment ({identity[0]}, {identity[1]!r}, seed "
-                f"{identity[4]}, step {identity[5]}) and would count as one seed; sweep them separately or remove one"
+                f"{other} and {checkpoint} are two runs of one experiment ({ckpt['env_id']}, {config.label!r}, seed "
+                f"{ckpt['args']['seed']}, step {ckpt['step_mark']}) and would count as one seed; sweep them separately "
+                "or remove one"
             )
-        labels[checkpoint], evaluations[checkpoint] = identity[1], evaluation
+        labels[checkpoint], evaluations[checkpoint] = config.label, evaluation
         for gamma in dict.fromkeys(args.gammas if args.gammas is not None else DEFAULT_GAMMAS[kind]):
             cells[(checkpoint, gamma)] = cell_path(output, checkpoint, gamma, settings, digest, stack,
                                                    evaluation.evaluator)  # fmt: skip
