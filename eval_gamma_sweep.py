@@ -69,13 +69,10 @@ from pgg_utils import startup  # first: a Ctrl-C during the imports below is one
 import hashlib
 import inspect
 import io
-import multiprocessing
-import os
-import signal
 import sys
 import time
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import as_completed
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,7 +111,7 @@ from pgg_utils.files import (
 )
 from pgg_utils.identity import Configuration, configuration, configuration_fields, run_of
 from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95, seed_means
-from pgg_utils.processes import die_with_parent
+from pgg_utils.processes import how_workers_died, start_pool, stop_pool
 from pgg_utils.progress import Progress, format_duration
 from pgg_utils.video import labelled, write_video
 
@@ -563,51 +560,6 @@ class WorkerDied(RuntimeFailure):
     """A worker ended while the sweep ran (the kernel's OOM killer sends SIGKILL); one line."""
 
 
-def init_worker(parent_pid: int) -> None:
-    """Pool initializer: a worker leaves Ctrl-C to the parent (which ends the workers), and dies with
-    the parent however the parent dies."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    signal.signal(
-        signal.SIGTERM, signal.SIG_DFL
-    )  # the pool's signal to end it, not a handler inherited from the parent
-    die_with_parent(parent_pid)
-
-
-def start_pool(workers: int, jobs: list[Job]) -> tuple[ProcessPoolExecutor, dict, dict]:
-    """(the pool, {future: job} of every job submitted to it, {pid: process} of its workers). Forked
-    workers are all started by the first submit, from this thread (their death signal is tied to the
-    thread that forks them). Unlike multiprocessing.Pool, which replaces a worker that dies and waits
-    forever for the cell it held, this pool breaks: every unfinished cell fails with BrokenProcessPool."""
-    pool = ProcessPoolExecutor(workers, multiprocessing.get_context("fork"), init_worker, (os.getpid(),))
-    try:
-        pool.submit(os.getpid)  # starts the workers; they are counted before any can die in a cell
-        processes = {p.pid: p for p in multiprocessing.active_children()}
-        return pool, {pool.submit(run_job, job): job for job in jobs}, processes
-    except BaseException:  # Ctrl-C while starting: the caller holds no pool yet to stop
-        stop_pool(pool, {p.pid: p for p in multiprocessing.active_children()})
-        raise
-
-
-def stop_pool(pool: ProcessPoolExecutor, processes: dict) -> None:
-    """Ends the workers now, their cells in flight lost (Ctrl-C, a pool broken by a dead worker, or the
-    sweep's end), then the pool, waiting for its manager thread. That thread must be gone before the
-    interpreter exits: Python 3.11's exit hook (concurrent.futures.process._python_exit) writes to the
-    thread's wakeup pipe without the lock under which the thread closes it, so a thread still closing its
-    pipe at exit makes that write fail ("Exception ignored ... OSError: [Errno 9] Bad file descriptor")."""
-    for process in processes.values():
-        process.terminate()  # SIGTERM, which how_workers_died tells from any other end
-    for process in processes.values():
-        process.join()
-    pool.shutdown(wait=True, cancel_futures=True)  # the workers are gone: the manager thread ends at once
-
-
-def how_workers_died(processes: dict) -> str:
-    """`pid 123 was killed by SIGKILL`: the workers that ended before the pool ended them (with SIGTERM)."""
-    ended = [(pid, p.exitcode) for pid, p in processes.items() if p.exitcode not in (None, -signal.SIGTERM)]
-    return ", ".join(f"pid {pid} " + (f"was killed by {signal.Signals(-code).name}" if code < 0
-                                      else f"exited with status {code}") for pid, code in ended) or "a worker ended"  # fmt: skip
-
-
 EVALUATED_BY_COLUMNS = [
     "run",
     "step",
@@ -815,7 +767,7 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
     handled, env_steps, start, failed, changed, pool, broken = 0, 0, time.time(), {}, set(), None, False
     try:
         if args.workers > 1 and len(jobs) > 1:
-            pool, futures, processes = start_pool(min(args.workers, len(jobs)), jobs)
+            pool, futures, processes = start_pool(min(args.workers, len(jobs)), run_job, jobs)
             results = (f.result() for f in as_completed(futures) if not isinstance(f.exception(), BrokenProcessPool))
         else:
             results = map(run_job, jobs)

@@ -24,6 +24,7 @@ import ppo_pgg_discrete
 from pgg_utils import cells, identity
 from pgg_utils.checkpoints import checkpoint_step
 from pgg_utils.files import read_csv
+from pgg_utils.processes import start_pool, stop_pool
 
 SCRIPT = [sys.executable, str(ROOT / "eval_gamma_sweep.py")]
 
@@ -596,8 +597,8 @@ def test_stopping_the_pool_ends_its_manager_thread_before_returning():
     from concurrent.futures.process import _ExecutorManagerThread
 
     for _ in range(3):
-        pool, _, processes = sweep.start_pool(2, [])
-        sweep.stop_pool(pool, processes)
+        pool, _, processes = start_pool(2, sweep.run_job, [])
+        stop_pool(pool, processes)
         assert not [t for t in threading.enumerate() if isinstance(t, _ExecutorManagerThread)]
         assert not any(process.is_alive() for process in processes.values())
 
