@@ -24,6 +24,7 @@ from pgg_utils import startup  # noqa: F401  (first: a Ctrl-C during the imports
 
 # isort: split
 import contextlib
+import functools
 import importlib.util
 import os
 import shutil
@@ -56,7 +57,7 @@ from pgg_utils.files import (
     write_atomic,
     write_manifest,
 )
-from pgg_utils.identity import Configuration, grid_run_name
+from pgg_utils.identity import GOAL_DIMS, Configuration, grid_run_name, variant_id
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
@@ -73,13 +74,44 @@ class Preset:
     episodes: int
 
 
-VARIANT_IDS = (*paper.VARIANTS, *paper.BEYOND_VARIANTS)
+# The task the grid's variants are named on, with the continuous script: one with goal dimensions, so that
+# every variant trains on it.
+NAMING_ENV = next(iter(GOAL_DIMS))
+
+
+@functools.cache
+def variant_name(flags: tuple[str, ...], env_id: str, kind: str) -> str:
+    """The id identity.variant_id gives a run of a variant's flags (paper.VARIANTS, paper.BEYOND_VARIANTS) on
+    `env_id`, the flags parsed by the `kind` training script's own Args as its command line is: the one
+    definition of a variant's name. ValueError (`needs ...`, `has flags ...`) where it cannot run there."""
+    module = scripts.original(kind)
+    try:
+        args = tyro.cli(module.Args, args=["--env-id", env_id, *paper.variant_flags(flags, env_id)],
+                        console_outputs=False)  # fmt: skip
+    except SystemExit:
+        raise ValueError(f"has flags that {Path(module.__file__).name} refuses: {' '.join(flags)}") from None
+    return variant_id(asdict(args))
+
+
+@functools.cache
+def grid_variants() -> dict[str, tuple[str, ...]]:
+    """{id: training flags} of the variants the grid can run: the paper's in its order, then those beyond it,
+    each named by variant_name on NAMING_ENV with the continuous script, which takes every variant's flags."""
+    named = {}
+    for flags in (*paper.VARIANTS, *paper.BEYOND_VARIANTS):
+        name = variant_name(flags, NAMING_ENV, "continuous")
+        if name in named:
+            raise ValueError(f"paper.py's variants {' '.join(named[name])} and {' '.join(flags)} are both {name}")
+        named[name] = flags
+    return named
+
+
+VARIANT_IDS = tuple(grid_variants())
+PAPER_VARIANT_IDS = VARIANT_IDS[: len(paper.VARIANTS)]
 PRESETS = {
-    "quick": Preset(("CartPole-v1",), 2, tuple(paper.VARIANTS), 50_000, 25_000, (1.0, 2.0, 5.0), 20),
-    "discrete": Preset(paper.PAPER_ENVS["discrete"], paper.PAPER_SEEDS, tuple(paper.VARIANTS), None, None, None, 50),
-    "continuous": Preset(
-        paper.PAPER_ENVS["continuous"], paper.PAPER_SEEDS, tuple(paper.VARIANTS), None, None, None, 50
-    ),
+    "quick": Preset(("CartPole-v1",), 2, PAPER_VARIANT_IDS, 50_000, 25_000, (1.0, 2.0, 5.0), 20),
+    "discrete": Preset(paper.PAPER_ENVS["discrete"], paper.PAPER_SEEDS, PAPER_VARIANT_IDS, None, None, None, 50),
+    "continuous": Preset(paper.PAPER_ENVS["continuous"], paper.PAPER_SEEDS, PAPER_VARIANT_IDS, None, None, None, 50),
 }
 RUNNING: set[subprocess.Popen] = set()  # training children, ended with the launcher
 SUBMITTED: list = []  # submitit jobs (the same), cancelled by SIGINT / SIGTERM
@@ -168,9 +200,11 @@ def argument_error(args: Args) -> str | None:
             return f"--envs: {error}"
         for variant in chosen.variants:
             try:
-                paper.variant_flags(variant, env_id)
+                name = variant_name(grid_variants()[variant], env_id, kind)
             except ValueError as e:
-                return f"--variants: {e}"
+                return f"--variants: {variant} {e}"
+            if name != variant:  # its runs would be named for another variant
+                return f"--variants: {variant}'s flags give its runs on {env_id} the variant id {name}"
         defaults = scripts.original(kind).Args()
         batch = defaults.num_envs * defaults.num_steps
         if chosen.checkpoint_interval is not None and chosen.checkpoint_interval < batch:
@@ -214,7 +248,7 @@ class RunSpec:
 
     def command(self) -> list[str]:
         cmd = [sys.executable, scripts.original(paper.action_kind(self.env_id)).__file__, "--env-id", self.env_id,
-               "--seed", str(self.seed), *paper.variant_flags(self.variant, self.env_id),
+               "--seed", str(self.seed), *paper.variant_flags(grid_variants()[self.variant], self.env_id),
                "--output-dir", self.root, "--run-name", self.name, "--torch-threads", "1"]  # fmt: skip
         if self.total_timesteps is not None:
             cmd += ["--total-timesteps", str(self.total_timesteps)]

@@ -47,7 +47,7 @@ import matplotlib.pyplot as plt
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.figures import steps_formatter, variant_colour
-from paper_study.paper import BEYOND_VARIANTS, PAPER_ENVS, paper_name, variant_rank
+from paper_study.paper import PAPER_ENVS, paper_name, variant_rank
 from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, welch
 from pgg_utils import pooling
 from pgg_utils.episodes import read_episodes
@@ -60,9 +60,11 @@ BASELINES = ("ppo", "pgg_g1.1")
 BC_FOLDER, BC = "bc_null", " null=bc"
 # The sets of the variant that clones the rollout's actions while it trains (results/beyond/bc_train/<task>).
 BC_TRAIN_FOLDER = "bc_train"
-CLONING_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--null-bc-coef" in flags}
-GOAL_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "{goal}" in flags}
-SCHEDULE_VARIANTS = {v for v, flags in BEYOND_VARIANTS.items() if "--guidance-schedule" in flags}
+# The ids of paper.BEYOND_VARIANTS by family (those with --null-bc-coef, {goal}, --guidance-schedule), as
+# reproduce.grid_variants names them; tests/test_reproduce.py checks them against it.
+CLONING_VARIANTS = {"pgg_g1.1_bc0.1"}
+GOAL_VARIANTS = {"pgg_g1.1_goal"}
+SCHEDULE_VARIANTS = {"pgg_g1to1.2", "pgg_adaptive1.1_kl0.04"}
 # The command task's set (results/beyond/command/run_all.sh): its folder, its variants in the report's order with
 # the null branch each is guided by, and its seeds. Its sweeps are read apart from the tasks' folders: its tests
 # are a family of their own and never enter the other questions' Holm families.
@@ -71,6 +73,8 @@ COMMAND_VARIANTS = {"pgg_g1.1_null17": "command null", "pgg_g1.1": "state null",
 COMMAND_NULL = "pgg_g1.1_null17"
 COMMAND_SEEDS = 5
 COMMAND_ENV = "paper_study.cheetah_velocity:HalfCheetahVelocity-v0"
+# Every variant of paper.BEYOND_VARIANTS: those the report compares with BASELINES.
+BEYOND_VARIANT_IDS = SCHEDULE_VARIANTS | GOAL_VARIANTS | CLONING_VARIANTS | {COMMAND_NULL}
 SETS_APART = (BC_FOLDER, COMMAND_FOLDER)  # folders of results/beyond that are not a task's
 COLLAPSE_FRACTION = 0.5
 REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
@@ -1335,7 +1339,7 @@ def report(args: Args) -> list[Path]:
                    for env in envs}  # fmt: skip
     rows, pooled = [], {}
     for env in envs:
-        for variant in (v for v in variants_of[env] if v in BEYOND_VARIANTS):
+        for variant in (v for v in variants_of[env] if v in BEYOND_VARIANT_IDS):
             for baseline in (b for b in BASELINES if b in variants_of[env]):
                 found, pooled[(env, variant, baseline)] = comparisons(means, env, variant, baseline)
                 rows.extend(found)

@@ -12,26 +12,34 @@ PAPER_ENVS = {
 }
 # The sweep's default γ values are the paper's.
 PAPER_GAMMAS = DEFAULT_GAMMAS
-# Variant id -> (training guidance γ_train, conditioning dropout), in the paper's order.
-VARIANTS = {"ppo": (1.0, 0.0), "pgg_g1.1": (1.1, 0.0), "pgg_drop0.1": (1.0, 0.1)}
+# The paper's variants in its order, as the training flags that make them: PPO (γ_train = 1), PGG (γ_train =
+# 1.1) and PGG with conditioning dropout 0.1. A variant's id is never written here: it is the one
+# pgg_utils.identity.variant_id gives a run of its flags (reproduce.grid_variants).
+VARIANTS = (
+    ("--guidance", "1.0", "--cond-dropout", "0.0"),
+    ("--guidance", "1.1", "--cond-dropout", "0.0"),
+    ("--guidance", "1.0", "--cond-dropout", "0.1"),
+)
 # Variants beyond the paper, the future work it names (scheduled and adaptive γ_train, guidance on a
-# goal), as the training flags that make them; "{goal}" stands for the task's GOAL_DIMS. Each id is the
-# one pgg_utils.identity gives a run of those flags (tests/test_extending.py).
-BEYOND_VARIANTS = {
+# goal), as the training flags that make them; "{goal}" stands for the task's GOAL_DIMS.
+BEYOND_VARIANTS = (
     # linear from 1 to 1.2: the same mean γ_train as the paper's constant 1.1, with no guidance while
     # the null branch has learned nothing
-    "pgg_g1to1.2": ("--guidance", "1", "--guidance-schedule", "linear", "--guidance-final", "1.2"),
+    ("--guidance", "1", "--guidance-schedule", "linear", "--guidance-final", "1.2"),
     # held at the KL that the constant 1.1 reaches over its first 300k Hopper steps (a pilot, README of
     # results/beyond), within γ_train 1 to 1.3
-    "pgg_adaptive1.1_kl0.04": ("--guidance", "1.1", "--guidance-schedule", "adaptive", "--guidance-kl-target", "0.04",
-                               "--guidance-bounds", "1", "1.3"),
-    "pgg_g1.1_goal": ("--guidance", "1.1", "--null-dims", "{goal}"),
+    ("--guidance", "1.1", "--guidance-schedule", "adaptive", "--guidance-kl-target", "0.04",
+     "--guidance-bounds", "1", "1.3"),
+    ("--guidance", "1.1", "--null-dims", "{goal}"),
     # the unconditional branch clones the rollout's actions, the null embedding alone (results/beyond/bc_train's pilot)
-    "pgg_g1.1_bc0.1": ("--guidance", "1.1", "--null-bc-coef", "0.1"),
+    ("--guidance", "1.1", "--null-bc-coef", "0.1"),
     # the null on the command of paper_study/cheetah_velocity.py (its COMMAND_INDEX, 17): π(a|s, ∅) is a
     # command-agnostic policy and γ > 1 amplifies what the command adds (results/beyond/command)
-    "pgg_g1.1_null17": ("--guidance", "1.1", "--null-dims", "17"),
-}  # fmt: skip
+    ("--guidance", "1.1", "--null-dims", "17"),
+)  # fmt: skip
+# The ids of VARIANTS in the paper's order, for the readers that sort by it without importing a training
+# script (torch); tests/test_reproduce.py checks that they are the ids reproduce derives.
+PAPER_ORDER = ("ppo", "pgg_g1.1", "pgg_drop0.1")
 
 
 # Our variant -> the paper's (method, training guidance) in paper_study/data/paper_results.csv: the rows of the
@@ -59,21 +67,12 @@ def is_paper_configuration(row: dict) -> bool:
             and all(word.startswith(STACK_WORDS) for word in words[1:]))  # fmt: skip
 
 
-def variant_flags(variant: str, env_id: str) -> list[str]:
-    """The training flags of a variant of the paper (VARIANTS) or beyond it (BEYOND_VARIANTS) on `env_id`;
-    ValueError where the variant needs goal dimensions the task has none of."""
-    if variant in VARIANTS:
-        guidance, dropout = VARIANTS[variant]
-        return ["--guidance", str(guidance), "--cond-dropout", str(dropout)]
-    flags = []
-    for flag in BEYOND_VARIANTS[variant]:
-        if flag == "{goal}":
-            if env_id not in GOAL_DIMS:
-                raise ValueError(f"{variant} needs goal dimensions; only {', '.join(GOAL_DIMS)} have them")
-            flags += [str(d) for d in GOAL_DIMS[env_id]]
-        else:
-            flags.append(flag)
-    return flags
+def variant_flags(flags: tuple[str, ...], env_id: str) -> list[str]:
+    """A variant's training flags (VARIANTS, BEYOND_VARIANTS) on `env_id`, "{goal}" replaced by the task's
+    GOAL_DIMS; ValueError (`needs goal dimensions; ...`) where the task has none."""
+    if "{goal}" in flags and env_id not in GOAL_DIMS:
+        raise ValueError(f"needs goal dimensions; only {', '.join(GOAL_DIMS)} have them")
+    return [part for flag in flags for part in ([str(d) for d in GOAL_DIMS[env_id]] if flag == "{goal}" else [flag])]
 
 
 PAPER_SEEDS = 5  # the paper's "mean ± 95% CI" is over 5 seeds (see the README's "The statistic")
@@ -137,8 +136,8 @@ def action_kind(env_id: str) -> str:
 
 
 def variant_rank(variant: str) -> int:
-    """A variant's place in the paper's order (VARIANTS), any other after them: how tables and legends sort."""
-    return list(VARIANTS).index(variant) if variant in VARIANTS else len(VARIANTS)
+    """A variant's place in the paper's order (PAPER_ORDER), any other after them: how tables and legends sort."""
+    return PAPER_ORDER.index(variant) if variant in PAPER_ORDER else len(PAPER_ORDER)
 
 
 def with_series(name: str, series: str) -> str:

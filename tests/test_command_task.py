@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
 
+import reproduce
 from paper_study import cheetah_velocity, command_tracking, paper
 from paper_study.cheetah_velocity import COMMAND_INDEX, COMMAND_RANGE, ENV_ID
 from pgg_utils import checkpoints, checks, scripts
@@ -87,7 +88,8 @@ def test_the_module_id_registers_the_task_and_training_imports_none_of_the_paper
 def test_the_command_null_variant_nulls_the_command_index_and_training_checks_it():
     """The set's command-null variant puts the null on COMMAND_INDEX, which training accepts for this task; one past
     the observation is refused in one line."""
-    flags = paper.variant_flags("pgg_g1.1_null17", ENV_ID)
+    flags = paper.variant_flags(reproduce.grid_variants()["pgg_g1.1_null17"], ENV_ID)
+    assert reproduce.variant_name(tuple(flags), ENV_ID, "continuous") == "pgg_g1.1_null17"
     assert flags[flags.index("--null-dims") + 1 :] == [str(COMMAND_INDEX)]
     assert checks.env_error(ENV_ID, "continuous", null_dims=(COMMAND_INDEX,)) is None
     assert "0..17" in checks.env_error(ENV_ID, "continuous", null_dims=(COMMAND_INDEX + 1,))

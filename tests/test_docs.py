@@ -188,13 +188,14 @@ def test_the_readmes_beyond_the_paper_numbers_are_the_roundings_of_the_reports_v
     """Each number in the README's "Beyond the paper" section is the correct rounding of the unrounded value
     (results/beyond/report_values.csv) it quotes, named in BEYOND_SOURCES: a report regenerated with other
     figures, a number rounded twice (from report.md's text) or quoted from the wrong cell fails here."""
-    from paper_study.paper import BEYOND_VARIANTS, paper_name
+    from paper_study.paper import paper_name
+    from reproduce import PAPER_VARIANT_IDS, VARIANT_IDS
 
     with open(ROOT / "results" / "beyond" / "report_values.csv", newline="") as f:
         rows = list(csv.DictReader(f))
     values = {(r["env_id"], r["variant"], r["baseline"], r["quantity"]): float(r["value"]) for r in rows}
     gammas = {float(m) for r in rows for m in re.findall(r"^return at γ ([\d.]+) at", r["quantity"])}
-    names = " ".join(paper_name(v) for v in [*BEYOND_VARIANTS, "ppo", "pgg_g1.1"])
+    names = " ".join(paper_name(v) for v in [*VARIANT_IDS[len(PAPER_VARIANT_IDS) :], "ppo", "pgg_g1.1"])
     labels = gammas | {float(x) for x in NUMBER.findall(names)}
     readme = (ROOT / "README.md").read_text()
     section = readme.split("## Beyond the paper\n", 1)[1].split("\n## ", 1)[0]

@@ -19,7 +19,6 @@ import numpy as np
 import pytest
 import torch
 import torch._dynamo.testing
-import tyro
 from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
 from torch import nn
 
@@ -279,18 +278,6 @@ def test_act_from_a_loaded_agent_is_the_sweeps_policy(tmp_path):
     sampled = agent.act(raw, guidance=1.2)
     torch.manual_seed(0)
     assert np.array_equal(sampled, agent.act(raw, guidance=1.2)) and not np.array_equal(sampled, mean)
-
-
-@pytest.mark.parametrize("variant", [*paper.VARIANTS, *paper.BEYOND_VARIANTS])
-def test_the_launchers_variants_are_named_by_their_flags(variant):
-    """reproduce.py names a run by its variant id; the flags it trains with must give that same id."""
-    env_id = "Reacher-v4"
-    flags = paper.variant_flags(variant, env_id)
-    module = ppo_pgg_continuous
-    args = tyro.cli(module.Args, args=["--env-id", env_id, *flags])
-    assert identity.variant_id(dataclasses.asdict(args)) == variant
-    compared = paper.paper_rows(variant) is not None
-    assert compared == (variant in ("ppo", "pgg_g1.1"))  # the paper's tables hold PPO and γ_train 1.1
 
 
 def test_a_linear_schedule_that_does_not_move_is_refused(tmp_path):

@@ -10,11 +10,18 @@ import pytest
 from conftest import ROOT
 
 import reproduce
+from paper_study import beyond_report, paper
 from pgg_utils import checkpoints
 from pgg_utils.files import RECORD, InputError, lock_directory, read_csv, sha256_of
 
 TINY = ["--total-timesteps", "2048", "--checkpoint-interval", "1024", "--seeds", "2", "--variants", "ppo", "pgg_g1.1",
         "--gammas", "1", "2", "--episodes", "3"]  # fmt: skip
+
+
+# The ids of today's grid (paper.VARIANTS, then paper.BEYOND_VARIANTS): what its runs, tables and committed outputs
+# are named by.
+GRID_VARIANTS = ("ppo", "pgg_g1.1", "pgg_drop0.1", "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1_goal",
+                 "pgg_g1.1_bc0.1", "pgg_g1.1_null17")  # fmt: skip
 
 
 def tiny_args(tmp_path, name, **overrides) -> reproduce.Args:
@@ -279,6 +286,8 @@ def test_the_launch_counts_trained_half_done_and_not_started_runs(tmp_path):
         (["--checkpoint-interval", "256"], "error: --checkpoint-interval must be at least one batch"),
         (["--gammas", "1", "nan"], "error: --gammas must be a number in [0, 1000], got nan"),
         (["--variants", "ppo", "ppo"], "error: --variants lists a value twice"),
+        (["--variants", "pgg_g1.1_goal"], "error: --variants: pgg_g1.1_goal needs goal dimensions; only Reacher-v4, "),
+        (["--variants", "pgg_g1.1_null17"], "error: --variants: pgg_g1.1_null17 has flags that ppo_pgg_discrete.py"),
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2_before_anything_is_created(tmp_path, flags, message):
@@ -329,3 +338,88 @@ def test_help_ends_the_variant_list_before_the_next_sentence():
         line.strip() == "pgg_drop0.1  PGG, γ_train = 1, conditioning dropout 0.1" for line in done.stdout.splitlines()
     )
     assert "dropout 0.1 Run directories" not in done.stdout
+
+
+def test_the_grids_variants_are_named_by_variant_id_and_keep_todays_ids():
+    """paper.py writes a variant as its training flags alone; reproduce names it by identity.variant_id of those flags
+    as the training script parses them. The ids of today's grid stay, the same on every task it runs on, and the
+    readers' literal ids (the paper's order, its tables' rows, beyond_report's families) are the derived ones."""
+    named = reproduce.grid_variants()
+    assert tuple(named) == reproduce.VARIANT_IDS == GRID_VARIANTS
+    assert reproduce.PAPER_VARIANT_IDS == paper.PAPER_ORDER == GRID_VARIANTS[: len(paper.VARIANTS)]
+    assert all(preset.variants == paper.PAPER_ORDER for preset in reproduce.PRESETS.values())
+    assert [paper.variant_rank(v) for v in GRID_VARIANTS] == [0, 1, 2, 3, 3, 3, 3, 3]
+    for variant, flags in named.items():
+        for env_id in ("Pusher-v4", "Reacher-v4") if "{goal}" in flags else ("Hopper-v4", "Pusher-v4", "Reacher-v4"):
+            assert reproduce.variant_name(flags, env_id, "continuous") == variant
+    assert [reproduce.variant_name(named[v], "CartPole-v1", "discrete") for v in GRID_VARIANTS[:5]] == [
+        *GRID_VARIANTS[:5]
+    ]
+
+    def family(flag: str) -> set[str]:
+        return {variant for variant, flags in named.items() if flag in flags}
+
+    assert beyond_report.CLONING_VARIANTS == family("--null-bc-coef")
+    assert beyond_report.GOAL_VARIANTS == family("{goal}")
+    assert beyond_report.SCHEDULE_VARIANTS == family("--guidance-schedule")
+    assert beyond_report.BEYOND_VARIANT_IDS == set(GRID_VARIANTS[len(paper.VARIANTS) :])
+    assert set(beyond_report.COMMAND_VARIANTS) <= set(GRID_VARIANTS)
+    assert {v for v in GRID_VARIANTS if paper.paper_rows(v) is not None} == {"ppo", "pgg_g1.1"}
+
+
+def test_the_committed_agents_were_trained_by_the_commands_the_grid_gives_today():
+    """Every run of every committed agents README (all eight variants) is named, and trained by a command, exactly
+    as reproduce's grid names and launches that env, variant and seed now."""
+    readmes = sorted((ROOT / "results").rglob("agents/README.md"))
+    rows = [line.split(" | ") for readme in readmes for line in readme.read_text().splitlines()
+            if line.startswith("| ") and "`python " in line]  # fmt: skip
+    assert {row[2] for row in rows} == set(GRID_VARIANTS)
+    for row in rows:
+        name, env_id, variant, seed, command = row[0].removeprefix("| "), row[1], row[2], int(row[3]), row[5]
+        words = command.strip("` |").split()
+        optional = {flag: int(words[words.index(flag) + 1]) if flag in words else None
+                    for flag in ("--total-timesteps", "--checkpoint-interval")}  # fmt: skip
+        spec = reproduce.RunSpec(env_id, variant, seed, words[words.index("--output-dir") + 1],
+                                 *optional.values(), "--compile" in words)  # fmt: skip
+        assert spec.name == name
+        assert ["python", Path(spec.command()[1]).name, *spec.command()[2:]] == words
+
+
+def test_a_variant_added_to_paper_py_as_flags_alone_is_launched_under_its_variant_id(tmp_path):
+    """A variant written into paper.BEYOND_VARIANTS as its flags, with no id anywhere, is a choice of --variants
+    under the id identity.variant_id gives a run of those flags, and the grid names and trains its runs so."""
+    code = (
+        "import tyro\n"
+        "from paper_study import paper\n"
+        "paper.BEYOND_VARIANTS += (('--guidance', '1.2', '--cond-dropout', '0.05', '--null-bc-coef', '0.2'),)\n"
+        "import reproduce\n"
+        "args = tyro.cli(reproduce.Args, args=['--envs', 'CartPole-v1', '--seeds', '1', '--variants', "
+        "'pgg_g1.2_drop0.05_bc0.2', 'ppo', '--root', 'runs'])\n"
+        "assert reproduce.argument_error(args) is None, reproduce.argument_error(args)\n"
+        "print('\\n'.join(' '.join(spec.command()[2:]) for spec in reproduce.grid(args)))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    flags_of_run = {"CartPole-v1__pgg_g1.2_drop0.05_bc0.2__s1": "--guidance 1.2 --cond-dropout 0.05 --null-bc-coef 0.2",
+                    "CartPole-v1__ppo__s1": "--guidance 1.0 --cond-dropout 0.0"}  # fmt: skip
+    assert done.stdout.splitlines() == [
+        f"--env-id CartPole-v1 --seed 1 {flags} --output-dir runs --run-name {name} --torch-threads 1 "
+        "--total-timesteps 50000 --checkpoint-interval 25000"  # the quick preset's
+        for name, flags in flags_of_run.items()
+    ]
+
+
+def test_a_variant_that_its_flags_name_otherwise_on_a_task_is_refused_there(monkeypatch, tmp_path):
+    """A variant is named on one task (reproduce.NAMING_ENV); where its flags give its runs another id (the null on
+    20 21 22 is Pusher-v4's goal), the grid refuses it in one line rather than name runs for the wrong variant."""
+    nulled = ("--guidance", "1.1", "--null-dims", "20", "21", "22")
+    monkeypatch.setattr(paper, "BEYOND_VARIANTS", (*paper.BEYOND_VARIANTS, nulled))
+    reproduce.grid_variants.cache_clear()
+    try:
+        assert reproduce.grid_variants()["pgg_g1.1_null20-21-22"] == nulled
+        args = tiny_args(tmp_path, "nulled", envs=("Pusher-v4",), variants=("pgg_g1.1_null20-21-22",))
+        assert reproduce.argument_error(args) == (
+            "--variants: pgg_g1.1_null20-21-22's flags give its runs on Pusher-v4 the variant id pgg_g1.1_goal"
+        )
+    finally:
+        reproduce.grid_variants.cache_clear()  # named again from paper.py's own variants
