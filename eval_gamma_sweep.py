@@ -31,7 +31,8 @@ it (same_script: yes, no, or unknown for checkpoints from before scripts recorde
 Configurations. A cell's seeds must be distinct runs of one training configuration: the script and
 every training argument (pgg_utils.identity.config_label). Every row carries `config`, its label: the
 variant, the script where it is not the repository's own, and every training argument that differs
-from the script's defaults, e.g. `pgg_g1.1 learning_rate=0.002` or `pgg_g1.1 script=ppo_pgg_relu.py`;
+from the script's defaults, e.g. `pgg_g1.1 learning_rate=0.002` or `pgg_g1.1 script=ppo_pgg_relu.py`,
+and `config_fields`, the same as a JSON object that readers compare without parsing the label;
 summaries are grouped by it, and two checkpoints of one env, configuration, seed and step are an error
 naming both. Checkpoints whose model holds a NaN or an infinity are skipped, never evaluated.
 
@@ -454,6 +455,7 @@ def run_job(job: Job) -> JobResult:
         "env_id": ckpt["env_id"],
         "variant": fields["variant"],
         "config": fields["config"],
+        "config_fields": fields["config_fields"],
         "run": run_of(ckpt, job.checkpoint),
         "seed": ckpt["args"]["seed"],
         "train_guidance": fields["train_guidance"],

@@ -13,7 +13,8 @@ variant followed by the training arguments that differ from the defaults, e.g. `
 CSVs without it count as config = variant. A configuration is that label with the exact training
 guidance and dropout of its rows (the label rounds them to 6 digits). Where one env and variant hold
 one configuration, tables and figures show the variant under the paper's name; where they hold
-several, each is its own row or series, labelled by the part of the configuration that differs. Two
+several, each is its own row or series, labelled by the fields that differ: the sweep's
+`config_fields` column (the label's parts as JSON, never parsed from the label but in CSVs without it). Two
 runs of one configuration with the same seed, or one cell in two CSVs, are an error naming both. An
 env's table (discrete or continuous) is its rows' `action_space`, or where a CSV lacks that column,
 the action space of the task itself.
@@ -212,6 +213,7 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     from pgg_utils import checkpoints, rundir  # torch: only where --runs is given
 
     found, left_out = [], []  # (configuration, seed, steps, returns, run directory); (env, run directory, why)
+    fields = {}  # configuration -> its label's fields
     for args_file in run_args_files(run_paths):
         run_dir = args_file.parent
         ckpt = checkpoints.last_readable(run_dir)[1]
@@ -228,7 +230,9 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
             left_out.append((run_args.get("env_id", "?"), run_dir, why))
             continue
         events = accumulator.Scalars("charts/episodic_return")
-        config = Configuration.of_checkpoint(ckpt).key
+        configuration = Configuration.of_checkpoint(ckpt)
+        config = configuration.key
+        fields.setdefault(config, configuration.label_fields())
         steps, returns = np.array([e.step for e in events]), np.array([e.value for e in events])
         found.append((config, run_args["seed"], steps, returns, run_dir))
     if not found:
@@ -237,7 +241,7 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     sources = defaultdict(set)
     for config, _, _, _, run_dir in found:
         sources[config].add(str(run_dir.parent))
-    labels = config_labels((*config, frozenset(folders)) for config, folders in sources.items())
+    labels = config_labels({config: (fields[config], folders) for config, folders in sources.items()})
     curves = defaultdict(list)  # (env, variant, series) -> [(steps, returns)] per seed
     seen = {}  # (configuration, seed) -> run directory: one seed is one run
     for config, seed, steps, returns, run_dir in found:

@@ -52,6 +52,7 @@ from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, 
 from pgg_utils import pooling
 from pgg_utils.episodes import read_episodes
 from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic
+from pgg_utils.identity import config_fields
 from pgg_utils.pooling import mean_ci95
 
 BASELINES = ("ppo", "pgg_g1.1")
@@ -638,7 +639,7 @@ def read_bc(folder: Path, args: Args) -> tuple[dict, dict, list[tuple[str, str]]
         if Path(table).exists():
             with open(table, newline="") as f:
                 for r in csv.DictReader(f):
-                    variant = r["variant"] + (BC if "null=bc" in r["config"].split() else "")
+                    variant = r["variant"] + (BC if config_fields(r).get("null") == "bc" else "")
                     if step_of.get((r["env_id"], r["variant"])) == r["step"]:
                         heldout[(r["env_id"], variant)] = r
     order = lambda key: (key[0] not in PAPER_ENVS["continuous"], key[0], variant_rank(key[1]))

@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from paper_study.agreement import compare_row, fmt, fmt_p, p_is, step_label
 from paper_study.paper import paper_name, variant_rank
 from paper_study.stats import ALPHA, correct_family, sign_test
-from paper_study.summary import config_tokens, read_episodes, summarise
+from paper_study.summary import read_episodes, summarise
 from pgg_utils.episodes import select_mode
 from pgg_utils.files import InputError, one_line_errors, write_atomic
 
@@ -59,10 +59,8 @@ def check_same_config(first: dict, second: dict) -> None:
     """The two sides of a cell must be one configuration, the stack (`mujoco=`) aside. A sweep from before
     configs were recorded has the variant alone, and is taken to be the variant's defaults."""
     for key in first.keys() & second.keys():
-        tokens = [config_tokens(side[key]["config"]) for side in (first, second)]
-        for t in tokens:
-            t.pop("mujoco", None)
-        if tokens[0] != tokens[1]:
+        fields = [{k: v for k, v in side[key]["config_fields"].items() if k != "mujoco"} for side in (first, second)]
+        if fields[0] != fields[1]:
             raise InputError(f"{key[1]} on {key[0]} is '{first[key]['config']}' in one sweep and "
                              f"'{second[key]['config']}' in the other; compare one configuration")  # fmt: skip
         exact = [(side[key]["train_guidance"], side[key]["cond_dropout"]) for side in (first, second)]

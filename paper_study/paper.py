@@ -52,19 +52,17 @@ def paper_rows(variant: str) -> tuple[str, str] | None:
     return PAPER_ROWS_OF_VARIANT.get(variant)
 
 
-# The words of a configuration label (identity.config_label) that name the software stack a run trained
-# on, not how it trained: a cell from another MuJoCo is the paper's configuration, marked †.
-STACK_WORDS = ("mujoco=", "versions=")
+# The fields of a configuration label (identity.Configuration.label_fields) that name the software stack a
+# run trained on, not how it trained: a cell from another MuJoCo is the paper's configuration, marked †.
+STACK_FIELDS = ("mujoco", "versions")
 
 
 def is_paper_configuration(row: dict) -> bool:
     """Whether a summary row's configuration is one the paper's tables hold: a variant they have rows of,
-    trained by the repository's own script with no training argument other than the paper's (its label
-    names the variant and at most the stack). A fork (`script=`), a fitted null (`null=bc`) or any other
-    argument (`learning_rate=`, `total_timesteps=`, a fork's own) is another configuration."""
-    words = str(row["config"]).split()
-    return (paper_rows(row["variant"]) is not None and words[:1] == [row["variant"]]
-            and all(word.startswith(STACK_WORDS) for word in words[1:]))  # fmt: skip
+    trained by the repository's own script with no training argument other than the paper's (its label's
+    fields name at most the stack). A fork (`script`), a fitted null (`null`) or any other argument
+    (`learning_rate`, `total_timesteps`, a fork's own) is another configuration."""
+    return paper_rows(row["variant"]) is not None and set(row["config_fields"]) <= set(STACK_FIELDS)
 
 
 def variant_flags(flags: tuple[str, ...], env_id: str) -> list[str]:

@@ -15,7 +15,7 @@ from paper_study.agreement import series_id
 from paper_study.paper import action_kind, variant_rank
 from pgg_utils import episodes as sweep_episodes
 from pgg_utils.files import InputError, read_csv
-from pgg_utils.identity import configuration, is_mujoco
+from pgg_utils.identity import config_fields, configuration, is_mujoco
 from pgg_utils.pooling import mean_ci95, seed_means
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -60,31 +60,26 @@ def check_one_kind(rows: list[dict]) -> None:
             )
 
 
-def config_tokens(config: str) -> dict:
-    """`ppo learning_rate=0.002 mujoco=2.3.7` -> {"learning_rate": "0.002", "mujoco": "2.3.7"}."""
-    return dict(token.split("=", 1) for token in config.split()[1:] if "=" in token)
-
-
-def config_labels(pairs) -> dict:
-    """{(env, variant, config, guidance, dropout, source-set)} -> the label that tells configurations of
-    one env and variant apart: "" where the env and variant have one, else the arguments whose values
-    differ (`key=default` where a config does not set one; guidance and dropout exactly), with the
-    source folder added where that is still ambiguous."""
+def config_labels(configs: dict) -> dict:
+    """{(env, variant, config, guidance, dropout): (its label's fields, its source set)} -> the label that
+    tells configurations of one env and variant apart: "" where the env and variant have one, else the
+    fields whose values differ (`key=default` where a config does not set one; guidance and dropout
+    exactly), with the source folder added where that is still ambiguous."""
     groups = defaultdict(dict)
-    for env, variant, config, guidance, dropout, sources in pairs:
-        groups[(env, variant)][(config, guidance, dropout)] = sources
+    for (env, variant, *config), entry in configs.items():
+        groups[(env, variant)][tuple(config)] = entry
     labels = {}
-    for (env, variant), configs in groups.items():
-        if len(configs) == 1:
-            labels.update({(env, variant, *c): "" for c in configs})
+    for (env, variant), found in groups.items():
+        if len(found) == 1:
+            labels.update({(env, variant, *c): "" for c in found})
             continue
-        tokens = {c: config_tokens(c[0]) | {"guidance": repr(c[1]), "cond_dropout": repr(c[2])} for c in configs}
+        tokens = {c: fields | {"guidance": repr(c[1]), "cond_dropout": repr(c[2])} for c, (fields, _) in found.items()}
         keys = sorted({k for t in tokens.values() for k in t})
         differing = [k for k in keys if len({t.get(k) for t in tokens.values()}) > 1]
-        named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in differing) for c in configs}
-        for c in configs:
+        named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in differing) for c in found}
+        for c, (_, sources) in found.items():
             if not named[c] or list(named.values()).count(named[c]) > 1:
-                folders = sorted({Path(s).parent.name or s for s in configs[c]})
+                folders = sorted({Path(s).parent.name or s for s in sources})
                 named[c] = " ".join(filter(None, [named[c], f"from {', '.join(folders)}"]))
             labels[(env, variant, *c)] = named[c]
     return labels
@@ -95,12 +90,13 @@ def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
     mean episodic return, with the configuration's label (`series`), its table (`kind`) and MuJoCo
     version."""
     per_seed = seed_means(rows, cell_key)
-    sources, kinds, episodes = defaultdict(set), {}, defaultdict(int)
+    sources, fields, kinds, episodes = defaultdict(set), {}, {}, defaultdict(int)
     for row in rows:
         sources[configuration(row)].add(row["_source"])
+        fields.setdefault(configuration(row), config_fields(row))
         kinds[row["env_id"]] = row["kind"]
         episodes[cell_key(row)] += 1
-    labels = config_labels((*c, frozenset(s)) for c, s in sources.items())
+    labels = config_labels({c: (fields[c], s) for c, s in sources.items()})
     out = []
     for key in sorted(per_seed, key=lambda k: (k[0], variant_rank(k[1]), *k[1:])):
         env, variant, config, guidance, dropout, step, gamma, policy, null_branch = key
@@ -108,12 +104,12 @@ def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
         mean, half, _, _ = mean_ci95(means)
         out.append({
             "env_id": env, "variant": variant, "config": config, "train_guidance": guidance, "cond_dropout": dropout,
-            "kind": kinds[env], "series": labels[key[:5]],
+            "config_fields": fields[key[:5]], "kind": kinds[env], "series": labels[key[:5]],
             "step": step, "eval_guidance": gamma, "policy": policy, "null_branch": null_branch,
             "n_seeds": len(means), "n_episodes": episodes[key],
             "mean": mean, "ci95": half, "sd": float(np.std(means, ddof=1)) if len(means) > 1 else math.nan,
             "seed_means": ";".join(f"{m:.4f}" for m in means), "seeds": list(per_seed[key]),
-            "mujoco": mujoco_of(env, config, sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
+            "mujoco": mujoco_of(env, fields[key[:5]], sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
             **code_of(sources[key[:5]], provenance),
         })  # fmt: skip
     # A cell's siblings are the other cells of its configuration and evaluation mode: a run missing from
@@ -162,12 +158,13 @@ def code_of(sources, provenance: dict | None) -> dict:
     return {"code": "/".join(sorted({e.get("code", "") for e in entries} - {""})), "code_date": min(dates, default="")}
 
 
-def mujoco_of(env: str, config: str, sources, provenance: dict | None) -> str:
-    """The MuJoCo version behind a MuJoCo task's cells: its config's `mujoco=`, else its CSVs' provenance."""
+def mujoco_of(env: str, fields: dict, sources, provenance: dict | None) -> str:
+    """The MuJoCo version behind a MuJoCo task's cells: its configuration's `mujoco` field (the one that
+    trained it), else its CSVs' provenance."""
     if not is_mujoco(env):
         return ""
-    if "mujoco" in config_tokens(config):
-        return config_tokens(config)["mujoco"]
+    if "mujoco" in fields:
+        return fields["mujoco"]
     versions = {provenance_entry(provenance, s).get("mujoco", "") for s in sources} if provenance else set()
     return "/".join(sorted(v for v in versions if v))
 

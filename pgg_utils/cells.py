@@ -19,7 +19,7 @@ from pgg_utils.scripts import file_sha1
 # wrappers, numpy's and torch's rounding): recorded in every row, and part of every cell's identity.
 STACK_COLUMNS = ["mujoco", "gymnasium", "numpy", "torch"]
 EPISODE_COLUMNS = [
-    "env_id", "variant", "config", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
+    "env_id", "variant", "config", "config_fields", "run", "seed", "train_guidance", "cond_dropout", "step", "global_step",
     "eval_guidance", "policy", "null_branch", "episode", "episode_seed", "return", "length",
     *STACK_COLUMNS, "action_space",
 ]  # fmt: skip

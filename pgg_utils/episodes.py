@@ -4,12 +4,14 @@ against its sweep's record (files.check_record) or, without one, cell by cell, a
 (pooling.check_one_run_per_seed). The per-seed means its readers start from are pooling.seed_means,
 which the sweep's own summary uses too. Plain Python: nothing of the paper study."""
 
+import functools
+import json
 import math
 from collections import defaultdict
 from pathlib import Path
 
 from pgg_utils.files import InputError, check_record, read_csv_columns
-from pgg_utils.identity import configuration
+from pgg_utils.identity import configuration, label_of
 from pgg_utils.pooling import cell_of, check_one_run_per_seed
 
 FILE_NAME = "episodes.csv"
@@ -63,7 +65,7 @@ def read_episodes(paths, check=None) -> list[dict]:
 def check_values(row: dict, where: str) -> None:
     """InputError with one line for a value no sweep writes (an edited episodes.csv): a number column
     that is not a finite number, a step or seed that is not an integer, a return outside what its task
-    allows (RETURN_RANGE)."""
+    allows (RETURN_RANGE), a `config_fields` that does not spell its `config` label."""
     for column in (*NUMBER_COLUMNS, *INTEGER_COLUMNS):
         value = row[column]
         try:
@@ -74,9 +76,22 @@ def check_values(row: dict, where: str) -> None:
             ) from None
         if not math.isfinite(number):
             raise InputError(f"{where}: {column} {value!r} is not finite")
+    if row.get("config_fields") and not fields_spell_label(row["variant"], row.get("config"), row["config_fields"]):
+        raise InputError(f"{where}: config_fields {row['config_fields']!r} is not the JSON object of its "
+                         f"config {row.get('config')!r}")  # fmt: skip
     low, high = RETURN_RANGE.get(row["env_id"], (-math.inf, math.inf))
     if not low <= float(row["return"]) <= high:
         raise InputError(f"{where}: return {row['return']} is outside what {row['env_id']} allows, [{low:g}, {high:g}]")
+
+
+@functools.cache
+def fields_spell_label(variant: str, config: str | None, encoded: str) -> bool:
+    """Whether `encoded` is a JSON object whose fields, after `variant`, spell the label `config` (identity.label_of)."""
+    try:
+        fields = json.loads(encoded)
+    except ValueError:
+        return False
+    return isinstance(fields, dict) and label_of(variant, fields) == config
 
 
 def check_whole_cells(rows: list[dict], path: Path) -> None:

@@ -7,6 +7,7 @@ so a new argument in a script's `Args` keeps its runs apart with no table to ext
 argument and a fork's script also name its default run directory. Plain Python: nothing of the paper study."""
 
 import functools
+import json
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -165,40 +166,44 @@ class Configuration:
         skip = RUN_ONLY_ARGS | VARIANT_ARGS | {"env_id", "seed"} | frozen.keys()
         return {key: self.args[key] for key in sorted(self.args.keys() - skip)}
 
-    def training_words(self) -> list[str]:
-        """`key=value` for every training argument outside the variant that differs from its frozen
-        default (FROZEN_DEFAULTS of its action space), and for every argument those lack (a fork's new
-        one) whatever its value, sorted by name: two values of a fork's argument are two labels, whatever
-        the fork's default was when each ran. One an older checkpoint lacks counts as the default."""
+    def differing_arguments(self) -> dict[str, str]:
+        """{name: value as the label writes it} for every training argument outside the variant that differs
+        from its frozen default (FROZEN_DEFAULTS of its action space), and for every argument those lack (a
+        fork's new one) whatever its value, sorted by name: two values of a fork's argument are two labels,
+        whatever the fork's default was when each ran. One an older checkpoint lacks counts as the default."""
         args, defaults = self.args, FROZEN_DEFAULTS.get(self.kind, {})
-        words = []
+        differing = {}
         for key in sorted((defaults.keys() | args.keys()) - RUN_ONLY_ARGS - VARIANT_ARGS - {"env_id", "seed"}):
             value = args.get(key, defaults.get(key))
             if key not in defaults or normalised(value) != normalised(defaults[key]):
-                words.append(f"{key}={format_arg(value)}")
-        return words
+                differing[key] = format_arg(value)
+        return differing
+
+    def label_fields(self) -> dict[str, str]:
+        """What the label names after the variant, by name (label): `script`, `null`, each differing
+        argument, and the stack (`mujoco` or `versions`). The sweep writes it as a column (`config_fields`,
+        JSON), which its readers compare (config_fields), so that none parses a label back."""
+        fields = {} if self.is_original else {"script": self.script}
+        if self.null_fitted:
+            fields["null"] = "bc"
+        fields.update(self.differing_arguments())
+        if not self.versions:
+            fields["versions"] = "unknown"
+        elif self.versions.get("mujoco") and is_mujoco(self.args["env_id"]):
+            fields["mujoco"] = self.versions["mujoco"]
+        return fields
 
     @property
     def label(self) -> str:
         """The configuration as a label, the key every reader pools runs by: its variant,
         `script=<file>` where a script other than the repository's own for its action space trained it,
         `null=bc` where its null embedding was fitted after training (pgg_utils.bc_null),
-        every training argument that differs from its default (training_words),
+        every training argument that differs from its default (differing_arguments),
         then `mujoco=<version>` where the task runs on MuJoCo, or `versions=unknown` where the checkpoint
         records no package versions (format 1), so that it is never pooled with runs whose stack is known.
         Left out: env_id and seed (a table's rows and columns) and the run-only arguments. E.g. `pgg_g1.1
         learning_rate=0.002`, `ppo total_timesteps=50000 mujoco=2.3.7`, `pgg_g1.1 script=ppo_pgg_relu.py`."""
-        words = [self.variant]
-        if not self.is_original:
-            words.append(f"script={self.script}")
-        if self.null_fitted:
-            words.append("null=bc")
-        words += self.training_words()
-        if not self.versions:
-            words.append("versions=unknown")
-        elif self.versions.get("mujoco") and is_mujoco(self.args["env_id"]):
-            words.append(f"mujoco={self.versions['mujoco']}")
-        return " ".join(words)
+        return label_of(self.variant, self.label_fields())
 
     @property
     def run_name(self) -> str:
@@ -214,10 +219,11 @@ class Configuration:
                 f"__p{args.get('cond_dropout', 0.0):g}{extra}__s{args['seed']}")  # fmt: skip
 
     def fields(self) -> dict:
-        """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration`
-        reads them back): its variant, its label, its γ_train (the first, for a schedule) and dropout."""
-        return {"variant": self.variant, "config": self.label, "train_guidance": float(self.args["guidance"]),
-                "cond_dropout": float(self.args.get("cond_dropout", 0.0))}  # fmt: skip
+        """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration` and
+        `config_fields` read them back): its variant, its label, the label's fields (label_fields, as JSON),
+        its γ_train (the first, for a schedule) and dropout."""
+        return {"variant": self.variant, "config": self.label, "config_fields": json.dumps(self.label_fields()),
+                "train_guidance": float(self.args["guidance"]), "cond_dropout": float(self.args.get("cond_dropout", 0.0))}  # fmt: skip
 
     @property
     def key(self) -> tuple:
@@ -262,6 +268,21 @@ def run_of(ckpt: dict, path: str | Path) -> str:
     """The name of the run a checkpoint file belongs to, wherever it lies: the name it records, or, for a
     checkpoint from before it recorded one, its run directory's (`<run>/checkpoints/step_*.pt`)."""
     return ckpt.get("run") or Path(path).parent.parent.name
+
+
+def label_of(variant: str, fields: dict) -> str:
+    """A configuration's label from its variant and its label's fields (Configuration.label)."""
+    return " ".join([variant, *(f"{name}={value}" for name, value in fields.items())])
+
+
+def config_fields(row: dict) -> dict[str, str]:
+    """What a sweep's row says its configuration's label names after the variant (Configuration.label_fields):
+    its `config_fields` column; a CSV from before the sweep wrote that column has the label alone, whose
+    `name=value` words are read instead (the one place a label is read back, for those files)."""
+    if row.get("config_fields"):
+        return json.loads(row["config_fields"])
+    label = str(row.get("config") or row["variant"])
+    return dict(word.split("=", 1) for word in label.split()[1:] if "=" in word)
 
 
 def configuration(row: dict) -> tuple:

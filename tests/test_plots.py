@@ -30,6 +30,7 @@ from paper_study.stats import (
     welch,
     welch_power,
 )
+from pgg_utils import identity
 from pgg_utils.files import LOCK_FILE, lock_directory, read_csv, write_record
 
 # Per-seed mean returns of the synthetic sweep: (env, variant, step, eval γ) -> three seed means.
@@ -76,7 +77,7 @@ def episode_rows(
 
 def write_episodes(path, rows) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
-    columns = COLUMNS + [c for c in ("config", "action_space") if any(c in r for r in rows)]
+    columns = COLUMNS + [c for c in ("config", "config_fields", "action_space") if any(c in r for r in rows)]
     with open(path, "w", newline="") as f:
         writer = csv.DictWriter(f, columns)
         writer.writeheader()
@@ -325,8 +326,8 @@ def test_compare_paper_compares_the_papers_configurations_only_and_names_the_res
     assert proc.returncode == 0 and "CartPole-v1 `ppo script=ppo_pgg_scaled.py`" in proc.stderr
     assert not (tmp_path / "fork_out" / "compare_paper.csv").exists()
     assert "No cell compared" in (tmp_path / "fork_out" / "compare_paper.md").read_text()
-    assert paper.is_paper_configuration({"variant": "pgg_g1.1", "config": "pgg_g1.1 mujoco=2.3.7"})
-    assert not paper.is_paper_configuration({"variant": "ppo", "config": "ppo null=bc"})
+    assert paper.is_paper_configuration({"variant": "pgg_g1.1", "config_fields": {"mujoco": "2.3.7"}})
+    assert not paper.is_paper_configuration({"variant": "ppo", "config_fields": {"null": "bc"}})
 
 
 # --- configurations -------------------------------------------------------------------------------
@@ -357,6 +358,30 @@ def test_two_configs_are_never_pooled(tmp_path):
         if not line.get_label().startswith("_")
     }
     assert labels == {"PPO [learning_rate=0.002] (γ = 1)": [366.0], "PPO [learning_rate=default] (γ = 1)": [190.0]}
+
+
+def test_configurations_are_told_apart_by_their_fields_never_by_their_labels_words(tmp_path):
+    """Two values of a fork's argument that hold a space (`leaky relu`, `leaky tanh`): the labels' words
+    cannot tell them apart, the sweep's config_fields column does, and the series name each value whole.
+    An edited config_fields that no longer spells its label is refused in one line."""
+    cell = ("CartPole-v1", "ppo", 100000, 1.0)
+    rows = []
+    for activation, mean in (("leaky relu", 190.0), ("leaky tanh", 366.0)):
+        args = {"env_id": "CartPole-v1", "seed": 1, "guidance": 1.0, "activation": activation}
+        fields = identity.Configuration("discrete", "ppo_fork.py", args, versions={"torch": "2.13.0"}).fields()
+        assert json.loads(fields["config_fields"]) == {"script": "ppo_fork.py", "activation": activation}
+        rows += [r | {"config": fields["config"], "config_fields": fields["config_fields"]}
+                 for r in episode_rows({cell: [mean]}, run_suffix=activation[-4:])]  # fmt: skip
+    write_episodes(tmp_path / "episodes.csv", rows)
+    summary = summary_of(tmp_path / "episodes.csv")
+    assert sorted((r["series"], r["mean"]) for r in summary) == [("activation=leaky relu", 190.0),
+                                                                ("activation=leaky tanh", 366.0)]  # fmt: skip
+    assert not any(paper.is_paper_configuration(r) for r in summary)
+    write_episodes(tmp_path / "edited.csv", [r | {"config_fields": '{"activation": "leaky"}'} for r in rows])
+    with pytest.raises(
+        plots.InputError, match=r"edited.csv, line 2: config_fields .* is not the JSON object of its config"
+    ):
+        plots.read_episodes([tmp_path / "edited.csv"])
 
 
 def test_one_config_shows_the_paper_name_without_a_label(tmp_path):
