@@ -1,9 +1,11 @@
 """Which committed code trained each agent of "Beyond the paper": every checkpoint's `code` field (the commit it
 was trained at, whether its files were modified, the digest of the training script and pgg_utils/*.py) against
-the digest each commit of this repository gives (pgg_utils.runs.code_revision's recipe, recomputed from git):
+the digest each commit of this repository gives (pgg_utils.scripts.code_revision's recipe, recomputed from git):
 
-    python results/beyond/provenance/digests.py results/beyond/*/agents results/beyond/bc_train/*/agents \\
-        > results/beyond/provenance/digests.txt
+    python results/beyond/provenance/digests.py results/beyond/*-v4/agents results/beyond/bc_train/*/agents \\
+        results/beyond/command/agents > results/beyond/provenance/digests.txt
+
+(bc_null/agents are the tables' agents with a fitted null: their training is the tables', results/README.md.)
 
 One line per (set, seeds, digest): the commits it was trained at, the machine, and the commits whose files give
 that digest ("none" where no commit does: code known by its digest alone); for such a digest, the commits whose
@@ -18,7 +20,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT))
-from pgg_utils import runs
+from pgg_utils import checkpoints
 
 
 def git(*args: str) -> str:
@@ -58,8 +60,8 @@ def commit_digests(script: str) -> tuple[dict, dict]:
 def main() -> None:
     groups = defaultdict(lambda: {"seeds": set(), "commits": set(), "machines": set(), "scripts": set()})
     for folder in sys.argv[1:]:
-        for path in runs.find_checkpoints([folder]):
-            ckpt = runs.read_checkpoint_file(path)
+        for path in checkpoints.find_checkpoints([folder]):
+            ckpt = checkpoints.read_checkpoint_file(path)
             code = ckpt.get("code", {})
             key = (str(Path(folder).resolve().parent.relative_to(ROOT / "results")), ckpt["env_id"], ckpt["args"].get("seed"),
                    code.get("sha1", "?"), code.get("script", ckpt.get("script_path", "ppo_pgg_continuous.py")))  # fmt: skip
