@@ -1079,7 +1079,11 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
               "null is never trained (results/beyond/command, `run_all.sh`). Each agent at its last mark is given "
               "commands inside and outside the training range at each eval γ "
               "(`paper_study/command_tracking.py`: per episode the mean forward velocity over its 1000 steps; the "
-              "tracking error is |achieved − commanded|).")]  # fmt: skip
+              "tracking error is |achieved − commanded|). A velocity command rather than a preference vector over "
+              "objectives: a command has a target that an episode misses by a measured amount (how closely it "
+              "follows, the analogue of a sample's fidelity to its prompt), a scalar command can be asked outside "
+              "its trained range, and it is the meta-RL literature's standard task; a preference has no target of "
+              "its own, only a point of a Pareto front to be estimated first (results/beyond/README.md).")]  # fmt: skip
     tracking_csv = base / "tracking.csv"
     if not tracking_csv.exists():
         return [*lines, "", (f"**Not run yet:** {COMMAND_FOLDER}/tracking.csv does not exist (results/beyond/command/run_all.sh "
