@@ -116,7 +116,7 @@ def test_runs_trained_with_other_arguments_are_refused_and_never_swept(tmp_path,
         "not swept, trained with other arguments than this grid's: CartPole-v1__ppo__s1 (total_timesteps 1024 -> 2048)"
         in err
     )
-    swept = {line.split(",")[3] for line in (tmp_path / "second" / "episodes.csv").read_text().splitlines()[1:]}
+    swept = {row["run"] for row in files.read_csv(tmp_path / "second" / "episodes.csv")}
     assert swept == {"CartPole-v1__ppo__s2"}
     assert "**1,024 Steps**" in (tmp_path / "second" / "table_discrete.md").read_text()
 
