@@ -1248,12 +1248,57 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
                     shown.append(f"{mean:.3f} ({r['test']['difference']:+.3f}, {fmt_p(r['test']['p_holm'])})")
                 lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | {side} "
                              f"({', '.join(f'{c:g}' for c in chosen)}) | " + " | ".join(shown) + " |")  # fmt: skip
+    gains = {v: {g: command_gain(cells, v, g, in_range) for g in gammas} for v in variants}
+    lines += command_verdict(tests, knob, tested, gains, gaps)
     lines += ["", ("Commanded against achieved velocity, one line per eval γ, a panel per variant (mean over seeds, "
                    "95% CI band; the dashed diagonal follows the command exactly, the grey band is the training "
                    "range):"), "",
               f"![Commanded against achieved velocity, one line per eval γ]({COMMAND_FOLDER}/command_tracking.png)"]  # fmt: skip
     lines += command_sweep_lines(base, env)
     return [*lines, ""]
+
+
+def command_verdict(
+    tests: list[dict], knob: list[dict], outside: list[dict], gains: dict, gaps: list[str]
+) -> list[str]:
+    """What the command section's tests say, from their results alone: the falls in tracking error that γ > 1
+    gives, its cost in return at the largest γ, where the command null's change differs from the other
+    nulls' (below and above γ = 1), and the tests outside the training range; none for a partial set."""
+    if gaps:
+        return []
+    named = lambda v: f"{paper_name(v)} ({COMMAND_VARIANTS[v]})"
+    above_one = [t for t in tests if t["gamma"] > 1 and t["error_test"] is not None]
+    falls = [t for t in above_one if t["error_test"]["difference"] < 0 and t["error_test"]["p_holm"] < ALPHA]
+    best = min(above_one, key=lambda t: t["error_test"]["difference"], default=None)
+    top = max((t["gamma"] for t in above_one), default=None)
+    costs = [t for t in tests if t["gamma"] == top and t["return_test"] is not None]
+    parts = [(f"**What these tests say, and no more.** Following more closely: {len(falls)} of the {len(above_one)} "
+              "tests of a γ above 1 against γ = 1 find a significant fall in tracking error after Holm")]  # fmt: skip
+    if best is not None:
+        test = best["error_test"]
+        parts.append(f"; the largest fall is {-test['difference']:.3f} m/s ({named(best['variant'])} at γ {best['gamma']:g}, "
+                     f"p {fmt_p(test['p'])}, Holm {fmt_p(test['p_holm'])}; one test detects {test['detectable']:.3f})")  # fmt: skip
+    if costs:
+        parts.append(f". The cost at γ {top:g}: " + "; ".join(
+            f"{named(t['variant'])} {t['return_test']['difference']:+.1f} return (Holm p {fmt_p(t['return_test']['p_holm'])})"
+            for t in costs))  # fmt: skip
+    for side, rows in (("below", [r for r in knob if r["gamma"] < 1]), ("above", [r for r in knob if r["gamma"] > 1])):
+        found = [r for r in rows if r["p_holm"] < ALPHA]
+        parts.append(f". The command null's change against the other nulls' {side} γ = 1: {len(found)} of {len(rows)} "
+                     "differences significant after Holm" + "".join(
+                         f"; at γ {r['gamma']:g} against {named(r['baseline'])} {r['mean']:+.3f} m/s against "
+                         f"{r['baseline_mean']:+.3f} (Holm p {fmt_p(r['p_holm'])})" for r in found))  # fmt: skip
+    lowest = min((g for v in gains for g in gains[v]), default=None)
+    if lowest is not None and lowest < 1:
+        parts.append(f". The gain (slope of achieved on commanded velocity) from γ = 1 to γ {lowest:g}: " + "; ".join(
+            f"{named(v)} {np.mean(list(gains[v][1.0].values())):.2f} to {np.mean(list(gains[v][lowest].values())):.2f}"
+            for v in gains if gains[v].get(1.0) and gains[v].get(lowest)))  # fmt: skip
+    significant = [r for r in outside if r["p_holm"] < ALPHA]
+    parts.append(f". Outside the training range, {len(significant)} of the {len(outside)} tests of a γ against γ = 1 "
+                 "find a significant change in tracking error after Holm. What they cannot say: a change smaller than "
+                 "the detectable column (5 seeds), anything of another task, or of a command of more than one "
+                 "dimension.")  # fmt: skip
+    return ["", "".join(parts)]
 
 
 def command_sweep_lines(base: Path, env: str) -> list[str]:

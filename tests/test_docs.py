@@ -139,12 +139,15 @@ def test_the_custom_task_example_trains_as_written(tmp_path):
     assert "render_mode" in readme and "(docs/usage.md#a-custom-task)" in readme
 
 
-NUMBER = re.compile(r"(?<![\w.])\d+(?:\.\d+)?(?!\w|\.\d)")  # a number may end a sentence
+NUMBER = re.compile(r"(?<![\w.])<?\d+(?:\.\d+)?(?!\w|\.\d)")  # a number may end a sentence; `<0.001` a bound
 
 
 def rounds_from(text: str, value: float) -> bool:
     """Whether `text` (a number as written, its sign left to the words) is `value` rounded to as many decimals
-    as it shows: the rounding of the unrounded value, not of a figure already rounded (62.47 is 62, not 63)."""
+    as it shows: the rounding of the unrounded value, not of a figure already rounded (62.47 is 62, not 63);
+    `<x` holds a value below x."""
+    if text.startswith("<"):
+        return abs(value) < float(text[1:])
     decimals = len(text.partition(".")[2])
     return abs(abs(value) - float(text)) < 0.5 * 10**-decimals + 1e-12
 
@@ -156,6 +159,7 @@ LIN, ADA, CON, PPO, GOAL = "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1", 
 BC = " null=bc"  # a behaviour-cloned null's rows (paper_study/beyond_report.py)
 CLONING = "pgg_g1.1_bc0.1"  # the variant that clones while it trains
 FALL = "largest γ vs best (%)"
+CMD, NULL17 = "paper_study.cheetah_velocity:HalfCheetahVelocity-v0", "pgg_g1.1_null17"  # the command task's set
 BEYOND_SOURCES = [
     (H, LIN, "", "seeds"),  # 5 seeds
     (U, LIN, PPO, "fall difference (pts)"), (U, LIN, PPO, "fall p Holm"),
@@ -167,6 +171,10 @@ BEYOND_SOURCES = [
     (W, CLONING, PPO, "fresh fall difference (pts)"), (U, CLONING, PPO, "fresh fall difference (pts)"),
     (W, CLONING, PPO, "fresh fall p Holm"), None,  # γ_train 1.1
     (U, CLONING, CON, "fresh fall difference (pts)"), (U, CLONING, CON, "fresh fall p Holm"),
+    None, None, None, (CMD, CON, "γ 1", "tracking error change at γ 1.25"),  # above 1: γ > 1, γ 1.25
+    (CMD, CON, "γ 1", "tracking error p Holm at γ 1.25"), None,  # below 1
+    (CMD, NULL17, CON, "knob change at γ 0.5"), (CMD, NULL17, CON, "baseline's knob change at γ 0.5"),
+    (CMD, NULL17, CON, "knob p Holm at γ 0.5"),
 ]  # fmt: skip
 
 
@@ -201,3 +209,4 @@ def test_the_readmes_beyond_the_paper_numbers_are_the_roundings_of_the_reports_v
     section = readme.split("## Beyond the paper\n", 1)[1].split("\n## ", 1)[0]
     assert not beyond_numbers_unsupported(section, values, labels)
     assert rounds_from("62", -62.47) and not rounds_from("63", -62.47) and not rounds_from("16", 15.48)
+    assert rounds_from("<0.001", 6e-6) and not rounds_from("<0.001", 0.002)
