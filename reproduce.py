@@ -130,7 +130,7 @@ class Args:
     seeds: Annotated[int | None, FROM_PRESET] = None
     """number of seeds, 1..N"""
     variants: Annotated[tuple[Literal[VARIANT_IDS], ...] | None, FROM_PRESET] = None
-    """training variants: the paper's three (every preset has them), or beyond it: pgg_g1to1.2 (linear γ_train), pgg_adaptive1.1_kl0.04 (adaptive), pgg_g1.1_goal (null on the goal, Reacher-v4 and Pusher-v4)"""
+    """training variants: the paper's three (every preset has them), or those beyond it (paper_study/paper.py's BEYOND_VARIANTS, named by their flags; a goal variant needs Reacher-v4 or Pusher-v4)"""
     total_timesteps: Annotated[int | None, FROM_PRESET_OR_PAPER] = None
     """training steps per run"""
     checkpoint_interval: Annotated[int | None, FROM_PRESET_OR_PAPER] = None

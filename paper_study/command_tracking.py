@@ -103,8 +103,7 @@ def play_cell(agent, make_env, gamma: float, command: float, episodes: int, eval
 
 def evaluate_checkpoint(path: Path, args: Args) -> tuple[list[dict], str | None]:
     """(rows, None) of every cell of one checkpoint, or ([], why it was skipped) in one line."""
-    # The --workers processes share the cores: torch's default of a thread per core in each of them
-    # oversubscribed two cores: no checkpoint of the set finished in 10 minutes, against 2.4 with one thread each.
+    # One thread a worker process, so that --workers processes never oversubscribe the cores.
     torch.set_num_threads(1)
     digest = hashlib.sha1(path.read_bytes()).hexdigest()
     part = Path(f"{args.output}.parts") / f"{digest}_{settings_key(args)}.csv"

@@ -4,7 +4,7 @@ defaults that name a configuration. Plain data and a few rules; no torch."""
 import functools
 
 from pgg_utils.arguments import DEFAULT_GAMMAS
-from pgg_utils.identity import GOAL_DIMS
+from pgg_utils.identity import GOAL_DIMS, config_fields
 
 PAPER_ENVS = {
     "discrete": ("Acrobot-v1", "CartPole-v1"),
@@ -62,7 +62,7 @@ def is_paper_configuration(row: dict) -> bool:
     trained by the repository's own script with no training argument other than the paper's (its label's
     fields name at most the stack). A fork (`script`), a fitted null (`null`) or any other argument
     (`learning_rate`, `total_timesteps`, a fork's own) is another configuration."""
-    return paper_rows(row["variant"]) is not None and set(row["config_fields"]) <= set(STACK_FIELDS)
+    return paper_rows(row["variant"]) is not None and set(config_fields(row)) <= set(STACK_FIELDS)
 
 
 def variant_flags(flags: tuple[str, ...], env_id: str) -> list[str]:

@@ -97,6 +97,8 @@ def format_arg(value) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
+# The label's fields that no training argument may be named (Configuration.label_fields).
+LABEL_OWN_FIELDS = frozenset({"script", "null", "mujoco", "versions"})
 # What the run directories of the repository's own scripts have always held after the env (run_stem).
 ORIGINALS_EXPERIMENT = "ppo_pgg"
 # What a run directory of a null embedding fitted after training (pgg_utils.bc_null) adds to its source run's name.
@@ -183,10 +185,13 @@ class Configuration:
         """What the label names after the variant, by name (label): `script`, `null`, each differing
         argument, and the stack (`mujoco` or `versions`). The sweep writes it as a column (`config_fields`,
         JSON), which its readers compare (config_fields), so that none parses a label back."""
+        differing = self.differing_arguments()
+        if clash := sorted(differing.keys() & LABEL_OWN_FIELDS):
+            raise ValueError(f"an argument named {clash[0]} would hide the label's own field of that name; rename it")
         fields = {} if self.is_original else {"script": self.script}
         if self.null_fitted:
             fields["null"] = "bc"
-        fields.update(self.differing_arguments())
+        fields.update(differing)
         if not self.versions:
             fields["versions"] = "unknown"
         elif self.versions.get("mujoco") and is_mujoco(self.args["env_id"]):
@@ -276,11 +281,15 @@ def label_of(variant: str, fields: dict) -> str:
 
 
 def config_fields(row: dict) -> dict[str, str]:
-    """What a sweep's row says its configuration's label names after the variant (Configuration.label_fields):
-    its `config_fields` column; a CSV from before the sweep wrote that column has the label alone, whose
-    `name=value` words are read instead (the one place a label is read back, for those files)."""
-    if row.get("config_fields"):
-        return json.loads(row["config_fields"])
+    """What a row says its configuration's label names after the variant (Configuration.label_fields): its
+    `config_fields` (JSON as a sweep writes it, or already read); a CSV written without that column (a sweep
+    from before it, heldout_gamma.csv) has the label alone, whose `name=value` words are read instead (the
+    one place a label is read back)."""
+    value = row.get("config_fields")
+    if isinstance(value, dict):
+        return value
+    if value:
+        return json.loads(value)
     label = str(row.get("config") or row["variant"])
     return dict(word.split("=", 1) for word in label.split()[1:] if "=" in word)
 

@@ -174,7 +174,7 @@ BEYOND_SOURCES = [
     None, None, None, (CMD, CON, "γ 1", "tracking error change at γ 1.25"),  # above 1: γ > 1, γ 1.25
     (CMD, CON, "γ 1", "tracking error p Holm at γ 1.25"), None,  # below 1
     (CMD, NULL17, CON, "knob change at γ 0.5"), (CMD, NULL17, CON, "baseline's knob change at γ 0.5"),
-    (CMD, NULL17, CON, "knob p Holm at γ 0.5"),
+    (CMD, NULL17, CON, "knob p Holm at γ 0.5"), (CMD, NULL17, "", "gain at γ 0.5"), (CMD, CON, "", "gain at γ 0.5"),
 ]  # fmt: skip
 
 
