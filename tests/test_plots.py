@@ -378,7 +378,9 @@ def test_configurations_are_told_apart_by_their_fields_never_by_their_labels_wor
                                                                 ("activation=leaky tanh", 366.0)]  # fmt: skip
     assert not any(paper.is_paper_configuration(r) for r in summary)
     with pytest.raises(ValueError, match="an argument named script would hide the label's own field"):
-        identity.Configuration("discrete", "ppo_fork.py", {**args, "script": "x"}, versions={"torch": "2.13.0"}).fields()
+        identity.Configuration(
+            "discrete", "ppo_fork.py", {**args, "script": "x"}, versions={"torch": "2.13.0"}
+        ).fields()
     write_episodes(tmp_path / "edited.csv", [r | {"config_fields": '{"activation": "leaky"}'} for r in rows])
     with pytest.raises(
         plots.InputError, match=r"edited.csv, line 2: config_fields .* is not the JSON object of its config"
