@@ -365,6 +365,14 @@ def test_the_grids_variants_are_named_by_variant_id_and_keep_todays_ids():
     assert beyond_report.BEYOND_VARIANT_IDS == set(GRID_VARIANTS[len(paper.VARIANTS) :])
     assert set(beyond_report.COMMAND_VARIANTS) <= set(GRID_VARIANTS)
     assert {v for v in GRID_VARIANTS if paper.paper_rows(v) is not None} == {"ppo", "pgg_g1.1"}
+    # the other readers' literal ids, which would otherwise drop a comparison or a colour without a word
+    import plot_results
+    from paper_study import figures
+    from paper_study.data import read_dropout_figure
+
+    assert set(beyond_report.BASELINES) <= set(paper.PAPER_ORDER) == set(figures.VARIANT_COLOURS)
+    assert {variant for _, variant in plot_results.PAPER_FIGURE_GAMMAS} <= set(paper.PAPER_ORDER)
+    assert {variant for variant, _ in read_dropout_figure.LINE_COLOURS} <= set(paper.PAPER_ORDER)
 
 
 def test_the_committed_agents_were_trained_by_the_commands_the_grid_gives_today():
