@@ -1068,6 +1068,11 @@ def seeds_cell(values: dict, digits: int = 2) -> str:
     return f"{mean:.{digits}f} ± {half:.{digits}f}" if len(values) > 1 else f"{mean:.{digits}f}"
 
 
+def command_name(variant: str) -> str:
+    """A variant of the command set as its tables name it: the paper's name and the null it is guided by."""
+    return f"{paper_name(variant)} ({COMMAND_VARIANTS[variant]})"
+
+
 def command_section(folder: Path, values_out: list[dict]) -> list[str]:
     """The command task: does γ set how closely an agent follows its command, and with which null?"""
     base = folder / COMMAND_FOLDER
@@ -1140,7 +1145,7 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
               ("| variant (null) | γ | tracking error (m/s) | vs γ = 1 | p (Holm) | detectable | return | vs γ = 1 | "
                "p (Holm) |"), "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
     for t in tests:
-        name = f"{paper_name(t['variant'])} ({COMMAND_VARIANTS[t['variant']]})"
+        name = command_name(t["variant"])
         error_cells, return_cells = ["–", "–", "–"], ["–", "–"]
         if t["error"]:
             record(
@@ -1196,18 +1201,18 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
                                 ("knob difference", r["mean"] - r["baseline_mean"]), ("knob p", r["p"]),
                                 ("knob p Holm", r["p_holm"]), ("knob detectable", r["detectable"])):  # fmt: skip
             record(values_out, env, COMMAND_NULL, r["baseline"], f"{quantity} at γ {r['gamma']:g}", value)
-        lines.append(f"| {r['gamma']:g} | {paper_name(r['baseline'])} ({COMMAND_VARIANTS[r['baseline']]}) | "
+        lines.append(f"| {r['gamma']:g} | {command_name(r['baseline'])} | "
                      f"{r['mean']:+.3f} | {r['baseline_mean']:+.3f} | {r['mean'] - r['baseline_mean']:+.3f} | "
                      f"{fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) | {r['detectable']:.3f} |")  # fmt: skip
     lines += ["", "| variant (null) | " + " | ".join(f"gain at γ = {g:g}" for g in gammas) + " |",
               "|---|" + "---|" * len(gammas)]  # fmt: skip
+    gains = {v: {g: command_gain(cells, v, g, in_range) for g in gammas} for v in variants}
     for variant in variants:
-        gains = [command_gain(cells, variant, g, in_range) for g in gammas]
-        for gamma, gain in zip(gammas, gains):
+        for gamma, gain in gains[variant].items():
             if gain:
                 record(values_out, env, variant, "", f"gain at γ {gamma:g}", np.mean(list(gain.values())))
-        lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | "
-                     + " | ".join(seeds_cell(g) for g in gains) + " |")  # fmt: skip
+        lines.append(f"| {command_name(variant)} | "
+                     + " | ".join(seeds_cell(g) for g in gains[variant].values()) + " |")  # fmt: skip
 
     # Question 3: outside the training range, each γ against γ = 1, paired by seed.
     outside = [(side, chosen) for side, chosen in (("above", above), ("below", below)) if chosen]
@@ -1247,9 +1252,8 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
                         record(values_out, env, variant, "γ 1", f"tracking error {side} the range {quantity} at "
                                f"γ {r['gamma']:g}", value)  # fmt: skip
                     shown.append(f"{mean:.3f} ({r['test']['difference']:+.3f}, {fmt_p(r['test']['p_holm'])})")
-                lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | {side} "
+                lines.append(f"| {command_name(variant)} | {side} "
                              f"({', '.join(f'{c:g}' for c in chosen)}) | " + " | ".join(shown) + " |")  # fmt: skip
-    gains = {v: {g: command_gain(cells, v, g, in_range) for g in gammas} for v in variants}
     lines += command_verdict(tests, knob, tested, gains, gaps)
     lines += ["", ("Commanded against achieved velocity, one line per eval γ, a panel per variant (mean over seeds, "
                    "95% CI band; the dashed diagonal follows the command exactly, the grey band is the training "
@@ -1267,7 +1271,6 @@ def command_verdict(
     nulls' (below and above γ = 1), and the tests outside the training range; none for a partial set."""
     if gaps:
         return []
-    named = lambda v: f"{paper_name(v)} ({COMMAND_VARIANTS[v]})"
     above_one = [t for t in tests if t["gamma"] > 1 and t["error_test"] is not None]
     found = lambda sign: [
         t for t in above_one if sign * t["error_test"]["difference"] > 0 and t["error_test"]["p_holm"] < ALPHA
@@ -1280,25 +1283,25 @@ def command_verdict(
               "tests of a γ above 1 against γ = 1 find a significant fall in tracking error after Holm")]  # fmt: skip
     if best is not None and best["error_test"]["difference"] < 0:
         test = best["error_test"]
-        parts.append(f"; the largest fall is {-test['difference']:.3f} m/s ({named(best['variant'])} at γ {best['gamma']:g}, "
+        parts.append(f"; the largest fall is {-test['difference']:.3f} m/s ({command_name(best['variant'])} at γ {best['gamma']:g}, "
                      f"p {fmt_p(test['p'])}, Holm {fmt_p(test['p_holm'])}; one test detects {test['detectable']:.3f} before Holm)")  # fmt: skip
     parts.append(f"; {len(rises)} find a significant rise" + "".join(
-        f" ({named(t['variant'])} at γ {t['gamma']:g}, {t['error_test']['difference']:+.3f} m/s, Holm p "
+        f" ({command_name(t['variant'])} at γ {t['gamma']:g}, {t['error_test']['difference']:+.3f} m/s, Holm p "
         f"{fmt_p(t['error_test']['p_holm'])})" for t in rises))  # fmt: skip
     if costs:
         parts.append(f". The cost at γ {top:g}: " + "; ".join(
-            f"{named(t['variant'])} {t['return_test']['difference']:+.1f} return (Holm p {fmt_p(t['return_test']['p_holm'])})"
+            f"{command_name(t['variant'])} {t['return_test']['difference']:+.1f} return (Holm p {fmt_p(t['return_test']['p_holm'])})"
             for t in costs))  # fmt: skip
     for side, rows in (("below", [r for r in knob if r["gamma"] < 1]), ("above", [r for r in knob if r["gamma"] > 1])):
-        found = [r for r in rows if r["p_holm"] < ALPHA]
-        parts.append(f". The command null's change against the other nulls' {side} γ = 1: {len(found)} of {len(rows)} "
+        differing = [r for r in rows if r["p_holm"] < ALPHA]
+        parts.append(f". The command null's change against the other nulls' {side} γ = 1: {len(differing)} of {len(rows)} "
                      "differences significant after Holm" + "".join(
-                         f"; at γ {r['gamma']:g} against {named(r['baseline'])} {r['mean']:+.3f} m/s against "
-                         f"{r['baseline_mean']:+.3f} (Holm p {fmt_p(r['p_holm'])})" for r in found))  # fmt: skip
+                         f"; at γ {r['gamma']:g} against {command_name(r['baseline'])} {r['mean']:+.3f} m/s against "
+                         f"{r['baseline_mean']:+.3f} (Holm p {fmt_p(r['p_holm'])})" for r in differing))  # fmt: skip
     lowest = min((g for v in gains for g in gains[v]), default=None)
     if lowest is not None and lowest < 1:
         parts.append(f". The gain (slope of achieved on commanded velocity) from γ = 1 to γ {lowest:g}: " + "; ".join(
-            f"{named(v)} {np.mean(list(gains[v][1.0].values())):.2f} to {np.mean(list(gains[v][lowest].values())):.2f}"
+            f"{command_name(v)} {np.mean(list(gains[v][1.0].values())):.2f} to {np.mean(list(gains[v][lowest].values())):.2f}"
             for v in gains if gains[v].get(1.0) and gains[v].get(lowest)))  # fmt: skip
     significant = [r for r in outside if r["p_holm"] < ALPHA]
     parts.append(f". Outside the training range, {len(significant)} of the {len(outside)} tests of a γ against γ = 1 "
@@ -1340,7 +1343,7 @@ def command_sweep_lines(base: Path, env: str) -> list[str]:
                       f"{fmt_p(float(held['p_holm']))})")  # fmt: skip
         elif held:
             chosen = f"{float(held['selected_gamma']):g}: {held['status']}"
-        lines.append(f"| {paper_name(variant)} ({COMMAND_VARIANTS[variant]}) | {seeds} | " + " | ".join(shown)
+        lines.append(f"| {command_name(variant)} | {seeds} | " + " | ".join(shown)
                      + f" | {chosen} |")  # fmt: skip
     return lines
 

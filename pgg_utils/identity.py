@@ -227,7 +227,8 @@ class Configuration:
         """The columns of a sweep's rows that say which configuration a checkpoint is (`configuration` and
         `config_fields` read them back): its variant, its label, the label's fields (label_fields, as JSON),
         its γ_train (the first, for a schedule) and dropout."""
-        return {"variant": self.variant, "config": self.label, "config_fields": json.dumps(self.label_fields()),
+        variant, label_fields = self.variant, self.label_fields()
+        return {"variant": variant, "config": label_of(variant, label_fields), "config_fields": json.dumps(label_fields),
                 "train_guidance": float(self.args["guidance"]), "cond_dropout": float(self.args.get("cond_dropout", 0.0))}  # fmt: skip
 
     @property
