@@ -80,6 +80,25 @@ def test_a_partial_set_says_so_and_is_not_tabled_as_whole(tmp_path):
     assert "**Partial set:**" in text and "cells missing or short of 2 episodes (seed 3)" in text
 
 
+def test_the_verdict_counts_what_the_tests_found_and_waits_for_a_whole_set(tmp_path):
+    """The verdict paragraph counts the γ > 1 tests whose error falls after Holm, names the largest fall and the
+    command null's significant differences from the other nulls, all as the tables' values give them; a partial
+    set gets no verdict."""
+    text, values = section(tmp_path, tracking_rows())
+    verdict = next(line for line in text.splitlines() if line.startswith("**What these tests say, and no more.**"))
+    above = [(v, g) for v in beyond_report.COMMAND_VARIANTS for g in GAMMAS if g > 1]
+    falls = [(v, g) for v, g in above if values[(v, "γ 1", f"tracking error change at γ {g:g}")] < 0
+             and values[(v, "γ 1", f"tracking error p Holm at γ {g:g}")] < beyond_report.ALPHA]  # fmt: skip
+    assert f"{len(falls)} of the {len(above)} tests of a γ above 1" in verdict
+    largest = -values[("pgg_g1.1_null17", "γ 1", "tracking error change at γ 2")]
+    assert (
+        f"the largest fall is {largest:.3f} m/s (PGG, γ_train = 1.1, null on dims 17 (command null) at γ 2" in verdict
+    )
+    assert "against the other nulls' below γ = 1: 2 of 2 differences significant" in verdict
+    text, _ = section(tmp_path, tracking_rows(seeds=range(1, 5)))
+    assert "What these tests say" not in text
+
+
 def test_a_missing_set_is_named_and_gives_no_numbers(tmp_path):
     text, values = section(tmp_path, None)
     assert "**Not run yet:**" in text and values == {}
