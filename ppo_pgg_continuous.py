@@ -40,7 +40,7 @@ from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
 from pgg_utils.distributions import Gaussian, guide  # PGG: guide, the mix of the branches' parameters
 from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
-from pgg_utils.normalisation import NormalizeClipReward, ObservationStatistics, RunningObsNorm
+from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm
 from pgg_utils.policy import (
     branch_pass,
     eval_mode,
@@ -48,8 +48,11 @@ from pgg_utils.policy import (
     guided_actions,  # PGG
     null_pass,  # PGG
     numpy_policy,
+    PathError,
+    first_ratio_error,
     path_error,
     probe_observations,
+    randomised,
     refuse,
     trained_parameters,
 )
@@ -221,9 +224,11 @@ class Agent(nn.Module):
 
     def policy(self, obs: torch.Tensor, guidance: torch.Tensor | float | None, drop_mask=None) -> "Gaussian":  # PGG
         """pi_hat(.|obs) for a batch of normalised observations, the loss's. `guidance` None means a run
-        without guidance (PPO's own actor pass: the null embedding gets no gradient)."""
+        without guidance: PPO's own actor pass (the null embedding gets no gradient), still through guided_policy
+        (at 1, the conditional branch in both places: exactly pi(.|s)), so a changed distribution changes it too."""
         if guidance is None and drop_mask is None:  # PGG
-            return Gaussian(self.actor_mean(obs), self.actor_logstd)
+            cond = Gaussian(self.actor_mean(obs), self.actor_logstd)
+            return guided_policy(cond, cond, 1.0)  # PGG
         return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
 
     def acting_policy(self, raw_obs: np.ndarray, guidance, mean_null=None):  # PGG
@@ -294,7 +299,7 @@ class RolloutPolicy:
 
     def __init__(self, agent: Agent, guidance: float):  # PGG
         self.actor, self.critic = numpy_network(agent.actor_mean), numpy_network(agent.critic)
-        self.obs_norm = ObservationStatistics(agent.obs_norm)  # the rollout's observations update it in place
+        self.obs_norm = agent.obs_norm  # the agent's own normaliser: the rollout's observations update it in place
         self.guidance = guidance  # PGG
         self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
         self.std = np.exp(self.logstd)
@@ -501,7 +506,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
     minibatch_size = batch_size // args.num_minibatches
 
     per_minibatch = defaultdict(list)  # averaged over every minibatch, as CleanRL does the clip fraction
-    for _ in range(args.update_epochs):
+    for epoch in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
             drop_mask = None  # PGG
@@ -509,6 +514,8 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
             mb_inds = b_inds[start : start + minibatch_size]
             loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
+            if epoch == 0 and start == 0:  # before any step, on the parameters that acted: every ratio is 1
+                first_ratio_error(stats)
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
@@ -560,10 +567,12 @@ def train(args: Args, run: runs.Run) -> None:
                "vector (a 1-D Box): reshape them in make_env", envs)  # fmt: skip
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
-    # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution.
+    # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution, on an
+    # agent whose every parameter is drawn at random (a fresh one's zeros and ones would hide a path's difference).
     probe = probe_observations(envs.single_observation_space)
     noise = np.random.default_rng(1).standard_normal((len(probe), action_dim)).astype(np.float32)
-    if error := path_error(sys.modules[__name__], agent, args, probe, agent.obs_norm.normalise, noise):
+    probed = randomised(agent)
+    if error := path_error(sys.modules[__name__], probed, args, probe, probed.obs_norm.normalise, noise):
         refuse(error, envs)
     writer = run.open_writer(resumed)
     guided = uses_null_branch(args)  # PGG
@@ -623,6 +632,9 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
+                # The trained weights, before they are saved: `act` (the sweep's) and the rollouts still act as the loss.
+                if error := path_error(sys.modules[__name__], agent, args, probe, agent.obs_norm.normalise, noise):
+                    raise PathError(f"at step {global_step:,}: {error}")
                 resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:

@@ -46,8 +46,11 @@ from pgg_utils.policy import (
     guided_actions,  # PGG
     null_pass,  # PGG
     numpy_policy,
+    PathError,
+    first_ratio_error,
     path_error,
     probe_observations,
+    randomised,
     refuse,
     trained_parameters,
 )
@@ -181,9 +184,11 @@ class Agent(nn.Module):
 
     def policy(self, obs: torch.Tensor, guidance: torch.Tensor | float | None, drop_mask=None) -> "Categorical":  # PGG
         """pi_hat(.|obs) for a batch `obs` of shape (B, obs_dim), the loss's. `guidance` None means a run
-        without guidance (PPO's own actor pass: the null embedding gets no gradient)."""
+        without guidance: PPO's own actor pass (the null embedding gets no gradient), still through guided_policy
+        (at 1, the conditional branch in both places: exactly pi(.|s)), so a changed distribution changes it too."""
         if guidance is None and drop_mask is None:  # PGG
-            return Categorical(self.actor(obs))
+            cond = Categorical(self.actor(obs))
+            return guided_policy(cond, cond, 1.0)  # PGG
         return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
 
     def acting_policy(self, obs: np.ndarray, guidance, logits_null=None):  # PGG
@@ -436,7 +441,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
     minibatch_size = batch_size // args.num_minibatches
 
     per_minibatch = defaultdict(list)  # averaged over every minibatch, as CleanRL does the clip fraction
-    for _ in range(args.update_epochs):
+    for epoch in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
             drop_mask = None  # PGG
@@ -444,6 +449,8 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
             mb_inds = b_inds[start : start + minibatch_size]
             loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
+            if epoch == 0 and start == 0:  # before any step, on the parameters that acted: every ratio is 1
+                first_ratio_error(stats)
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
@@ -493,10 +500,12 @@ def train(args: Args, run: runs.Run) -> None:
                "(gymnasium.wrappers.TransformAction) or start the space at 0", envs)  # fmt: skip
     obs_dim = envs.single_observation_space.shape[0]
     agent = make_agent(asdict(args), checkpoint_shapes(envs))
-    # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution.
+    # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution, on an
+    # agent whose every parameter is drawn at random (a fresh one's zeros would hide a path's difference).
     probe = probe_observations(envs.single_observation_space)
     gumbel = standard_gumbel(np.random.default_rng(1).random((len(probe), envs.single_action_space.n), np.float32))
-    if error := path_error(sys.modules[__name__], agent, args, probe, lambda raw: raw.astype(np.float32), gumbel):
+    as_input = lambda raw: raw.astype(np.float32)
+    if error := path_error(sys.modules[__name__], randomised(agent), args, probe, as_input, gumbel):
         refuse(error, envs)
     writer = run.open_writer(resumed)
     guided = uses_null_branch(args)  # PGG
@@ -555,6 +564,9 @@ def train(args: Args, run: runs.Run) -> None:
                 writer.add_scalar(key, value, global_step)
 
             while marks and global_step >= marks[0]:
+                # The trained weights, before they are saved: `act` (the sweep's) and the rollouts still act as the loss.
+                if error := path_error(sys.modules[__name__], agent, args, probe, as_input, gumbel):
+                    raise PathError(f"at step {global_step:,}: {error}")
                 resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
     finally:

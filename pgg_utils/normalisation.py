@@ -1,6 +1,6 @@
 """The continuous script's observation and reward processing, CleanRL's per-sub-env wrappers at a fraction of their
 cost: the reward scaling (NormalizeClipReward, on each sub-env) and the observation statistics that live inside the
-agent (RunningObsNorm), so that every checkpoint carries them. The same float64 operations in the same order as
+agent (RunningObsNorm, the one normaliser), so that every checkpoint carries them. The same float64 operations in the same order as
 gymnasium's, the same bits (tests/test_continuous.py)."""
 
 import math
@@ -61,7 +61,8 @@ class RunningObsNorm(nn.Module):
     observations CleanRL's per-sub-env NormalizeObservation sees, in its order: every observation that
     a reset or a step returns, an episode's last one included (`collect_rollout`). Evaluation reads
     them frozen. With several sub-envs the statistics are pooled over them (CleanRL keeps one set per
-    sub-env, which no single checkpoint could carry)."""
+    sub-env, which no single checkpoint could carry). The one normaliser: the rollouts, `act` and the
+    sweep all call this object's methods, so a subclass (another normaliser, none) changes all of them."""
 
     def __init__(self, obs_dim: int, clip: float, epsilon: float = 1e-8):
         super().__init__()
@@ -70,12 +71,26 @@ class RunningObsNorm(nn.Module):
         self.register_buffer("var", torch.ones(obs_dim, dtype=torch.float64))
         self.register_buffer("count", torch.tensor(1e-4, dtype=torch.float64))
 
+    def statistics(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Numpy views of (mean, var, count). Cached: a buffer's `.numpy()` on every rollout step cost as much as the
+        update itself. The views follow load_state_dict's in-place copies; a buffer replaced by another tensor (`to`,
+        `load_state_dict(assign=True)`) or a copy of the module (its cache is not copied) makes them anew."""
+        buffers = (self._buffers["mean"], self._buffers["var"], self._buffers["count"])
+        cached = self.__dict__.get("_views")
+        if cached is None or any(held is not buffer for held, buffer in zip(cached[0], buffers)):
+            cached = self.__dict__["_views"] = (buffers, tuple(buffer.numpy() for buffer in buffers))
+        return cached[1]
+
+    def __getstate__(self):
+        return {key: value for key, value in self.__dict__.items() if key != "_views"}
+
     def normalise(self, raw_obs) -> np.ndarray:
-        return normalise_obs(raw_obs, self.mean.numpy(), self.var.numpy(), self.epsilon, self.clip)
+        mean, var, _ = self.statistics()
+        return normalise_obs(raw_obs, mean, var, self.epsilon, self.clip)
 
     def update(self, raw_obs: np.ndarray) -> None:
         """Adds the rows of `raw_obs` to the statistics, in place."""
-        update_running_moments(self.mean.numpy(), self.var.numpy(), self.count.numpy(), raw_obs)
+        update_running_moments(*self.statistics(), raw_obs)
 
     def observe(self, raw_obs: np.ndarray) -> np.ndarray:
         """Adds `raw_obs` to the statistics and returns it normalised by them."""
@@ -84,21 +99,3 @@ class RunningObsNorm(nn.Module):
 
     def forward(self, raw_obs) -> torch.Tensor:
         return torch.from_numpy(self.normalise(raw_obs))
-
-
-class ObservationStatistics:
-    """Numpy views of a RunningObsNorm's statistics, for the rollouts' updates step by step: a buffer's `.numpy()` on
-    every call cost as much as the update itself. Build one per rollout (the views follow load_state_dict's copies)."""
-
-    def __init__(self, norm: RunningObsNorm):
-        self.mean, self.var, self.count = norm.mean.numpy(), norm.var.numpy(), norm.count.numpy()
-        self.epsilon, self.clip = norm.epsilon, norm.clip
-
-    def update(self, raw_obs: np.ndarray) -> None:
-        """Adds the rows of `raw_obs` to the statistics, in place."""
-        update_running_moments(self.mean, self.var, self.count, raw_obs)
-
-    def observe(self, raw_obs: np.ndarray) -> np.ndarray:
-        """Adds `raw_obs` to the statistics and returns it normalised by them."""
-        self.update(raw_obs)
-        return normalise_obs(raw_obs, self.mean, self.var, self.epsilon, self.clip)

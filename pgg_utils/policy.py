@@ -4,15 +4,19 @@ Each script defines its action distribution once (`guided_policy`: the two branc
 the loss, the rollouts' numpy copy and `Agent.act` all call it. This module holds what is not the algorithm:
 - `numpy_policy`: the definition run on numpy branches (the rollouts', `act`'s), or, where it is written for torch
   alone, on their tensors (slower, the same definition; never a hand-written copy);
-- `path_error`, the start-up check: the rollouts, `act` and the loss agree with the definition on a probe batch at
-  a γ other than 1, and the first minibatch's ratio is 1; a fork that edits one path and not the others stops in
-  one line naming it;
+- `path_error`, the check of the paths against the definition: the rollouts, `act` and the loss agree with it on a
+  probe batch at a γ other than 1, and the loss's first ratio is 1. When training starts it runs on a `randomised`
+  copy of the agent (every parameter and buffer drawn at random, so a path that reads another parameter than the
+  definition's disagrees), and at every checkpoint on the trained agent itself; `first_ratio_error` checks every
+  update's first minibatch. A fork that edits one path and not the others stops in one line naming it;
 - the null branch of an actor whose training mode couples rows or moves statistics (BatchNorm) or draws noise
   (Dropout): computed on its own, in eval mode (`branch_pass`, `null_pass`), so it needs no batch and moves nothing;
 - `missing_methods`: the methods of `Agent` that the rest of the project calls;
 - `guided_actions`, `Agent.act`'s body (its input checks, sampling, clipping), and `trained_parameters`, whether the
   null embedding trains."""
 
+import copy
+import math
 import sys
 from contextlib import contextmanager, nullcontext
 
@@ -27,10 +31,17 @@ from pgg_utils.guidance import reads_parameter
 PROBE_GUIDANCE = 1.3
 PROBE_ROWS = 8
 PROBE_RTOL, PROBE_ATOL = 1e-4, 1e-5
-# The first minibatch's approx_kl, mean((r - 1) - log r) >= 0 per row, above which the ratio is not 1.
+# The first minibatch's approx_kl, mean((r - 1) - log r) >= 0 per row, above which the ratio is not 1: on the probe
+# batch, and (looser: float32 rounding of trained networks on a whole minibatch) on every update's first minibatch.
 PROBE_MAX_KL = 1e-7
+LIVE_MAX_KL = 1e-6
 # Layers whose training mode mixes rows, moves statistics or draws noise.
 MODE_DEPENDENT = (nn.modules.batchnorm._BatchNorm, nn.modules.dropout._DropoutNd)
+
+
+class PathError(Exception):
+    """A path of a training run (the rollouts, the loss, `act`) disagrees with the definition on the agent as it
+    trains: the message, one line, names the path and what differs."""
 
 
 def refuse(error: str, envs=None) -> None:
@@ -161,6 +172,36 @@ def path_error(script, agent, args, raw_obs: np.ndarray, normalise, noise: np.nd
     finally:
         torch.set_rng_state(rng_state)
     return None
+
+
+def randomised(agent):
+    """A copy of `agent` whose every floating-point parameter and buffer is drawn at random, from a generator of its
+    own (no global RNG moves): the start-up probe runs on it, since a fresh agent (log-stds and the null embedding
+    0, the observation statistics 0 and 1) hides a path that reads another parameter than the definition's.
+    Parameters are normal, scaled by 1/√fan-in where they have one; buffers are drawn from [0.5, 1.5], a valid
+    variance or count."""
+    probed = copy.deepcopy(agent)
+    generator = torch.Generator().manual_seed(0)
+    with torch.no_grad():
+        for parameter in probed.parameters():
+            scale = 1 / math.sqrt(parameter.shape[-1]) if parameter.dim() > 1 else 0.5
+            parameter.copy_(scale * torch.randn(parameter.shape, generator=generator, dtype=parameter.dtype))
+        for buffer in probed.buffers():
+            if buffer.is_floating_point():
+                buffer.copy_(0.5 + torch.rand(buffer.shape, generator=generator, dtype=buffer.dtype))
+    return probed
+
+
+def first_ratio_error(stats: dict) -> None:
+    """PathError where an update's first minibatch, computed before any optimizer step on the parameters that acted,
+    does not give the rollout's actions the rollout's log-probabilities (every ratio 1). A non-finite KL is left to
+    the run's own check of non-finite losses."""
+    kl = float(stats["losses/approx_kl"])
+    if math.isfinite(kl) and kl > LIVE_MAX_KL:
+        raise PathError(
+            f"the first minibatch's ratio is not 1 (approx_kl {kl:.3g} before any step): minibatch_loss's "
+            "log-probabilities of the rollout's actions differ from the rollouts' own (RolloutPolicy.act)"
+        )
 
 
 def probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidance) -> str | None:

@@ -34,6 +34,7 @@ from pgg_utils.checkpoints import (
 from pgg_utils.checks import argument_error
 from pgg_utils.files import LockedError, exit_status, lock_directory, write_atomic
 from pgg_utils.identity import Configuration
+from pgg_utils.policy import PathError
 from pgg_utils.progress import Progress
 from pgg_utils.rundir import (
     NonFiniteError,
@@ -366,7 +367,7 @@ def launch(args, kind: str, script: str, train) -> None:
     try:
         ctrl_c_handled()
         train(run.args, run)
-    except (KeyboardInterrupt, OSError, NonFiniteError, CheckpointError) as e:
+    except (KeyboardInterrupt, OSError, NonFiniteError, CheckpointError, PathError) as e:
         latest = latest_checkpoint(run.dir)
         if isinstance(e, KeyboardInterrupt):
             kept = (
@@ -377,6 +378,8 @@ def launch(args, kind: str, script: str, train) -> None:
             print(f"interrupted; {run.dir}: {kept}", file=sys.stderr)
             sys.exit(130)
         message = str(e)
+        if isinstance(e, PathError):  # the checkpoints written before it passed the same check
+            message += f"; checkpoints up to {latest.name} are kept" if latest else "; no checkpoint was written"
         if isinstance(e, OSError):  # write_atomic's name the file; TensorBoard's name nothing: its newest events file
             written = e.strerror and e.strerror.startswith("cannot write")
             events = sorted(run.dir.glob("events.out.tfevents.*"), key=lambda path: path.stat().st_mtime)
