@@ -40,14 +40,14 @@ from pgg_utils.distributions import Categorical, guide, gumbel_noise  # PGG: gui
 from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network, standard_gumbel
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.policy import (
+    PathError,
     branch_pass,
     eval_mode,
+    first_ratio_error,
     frozen,
     guided_actions,  # PGG
     null_pass,  # PGG
     numpy_policy,
-    PathError,
-    first_ratio_error,
     path_error,
     probe_observations,
     randomised,

@@ -9,7 +9,6 @@ from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
-import pytest
 import torch
 from conftest import ROOT, one_line_error
 
@@ -40,13 +39,13 @@ def train_fork(path: Path, tmp_path: Path, *flags: str) -> subprocess.CompletedP
 # the rollouts and `act` read) left as it was: equal at initialisation (both 0), apart as soon as either moves.
 OWN_NULL_SIGMA = (
     ("        self.actor_logstd = nn.Parameter(torch.zeros(1, action_dim))\n",
-     "        self.actor_logstd = nn.Parameter(torch.zeros(1, action_dim))\n"
-     "        self.null_own_logstd = nn.Parameter(torch.zeros(1, action_dim))\n"),
+     ("        self.actor_logstd = nn.Parameter(torch.zeros(1, action_dim))\n"
+     "        self.null_own_logstd = nn.Parameter(torch.zeros(1, action_dim))\n")),
     ("Gaussian(mean_null, self.null_logstd())  # PGG\n", "Gaussian(mean_null, self.null_own_logstd)  # PGG\n"),
     ("    return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std)  # PGG\n",
-     "    precision = (1 - guidance) / null.std**2 + guidance / cond.std**2\n"
+     ("    precision = (1 - guidance) / null.std**2 + guidance / cond.std**2\n"
      "    mean = ((1 - guidance) * null.mean / null.std**2 + guidance * cond.mean / cond.std**2) / precision\n"
-     "    return Gaussian(mean, -0.5 * precision.log())\n"),
+     "    return Gaussian(mean, -0.5 * precision.log())\n")),
 )  # fmt: skip
 
 
@@ -75,11 +74,11 @@ def test_the_probe_copy_draws_every_parameter_and_buffer_and_moves_no_global_rng
 # own object, so the fork trains on what it is swept on.
 NO_NORMALISATION = (
     ("ACTION_SPACE = \"continuous\"",
-     "class Unnormalised(RunningObsNorm):\n"
+     ("class Unnormalised(RunningObsNorm):\n"
      "    def normalise(self, raw_obs):\n"
-     "        return np.asarray(raw_obs, dtype=np.float32)\n\n\nACTION_SPACE = \"continuous\""),
+     "        return np.asarray(raw_obs, dtype=np.float32)\n\n\nACTION_SPACE = \"continuous\"")),
     ("        self.obs_norm = RunningObsNorm(obs_dim, obs_clip)\n",
-     "        self.obs_norm = Unnormalised(obs_dim, obs_clip)\n"),
+     ("        self.obs_norm = Unnormalised(obs_dim, obs_clip)\n")),
 )  # fmt: skip
 
 
@@ -113,9 +112,9 @@ def test_a_normaliser_the_fork_changes_is_the_one_the_rollouts_use(tmp_path, mon
 # stale on the live agent once the first update moves the null embedding.
 MEMOISED_NULL = (
     ("        return null_pass(self.actor_mean, self.null_obs.unsqueeze(0))[0]  # PGG\n",
-     "        if getattr(self, \"memo\", None) is None:\n"
+     ("        if getattr(self, \"memo\", None) is None:\n"
      "            self.memo = null_pass(self.actor_mean, self.null_obs.unsqueeze(0))[0].detach()\n"
-     "        return self.memo\n"),
+     "        return self.memo\n")),
 )  # fmt: skip
 
 
@@ -132,9 +131,9 @@ def test_a_path_that_goes_stale_as_the_agent_trains_stops_at_the_next_update(tmp
 # copy and at the first checkpoint, stale at the next.
 MEMOISED_ACTING_NULL = (
     ("            mean_null = self.unconditional_mean().detach().numpy()  # PGG\n",
-     "            if getattr(self, \"acting_memo\", None) is None:\n"
+     ("            if getattr(self, \"acting_memo\", None) is None:\n"
      "                self.acting_memo = self.unconditional_mean().detach().numpy()\n"
-     "            mean_null = self.acting_memo\n"),
+     "            mean_null = self.acting_memo\n")),
 )  # fmt: skip
 
 
