@@ -515,7 +515,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
             mb_inds = b_inds[start : start + minibatch_size]
             loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
             if epoch == 0 and start == 0:  # before any step, on the parameters that acted: every ratio is 1
-                first_ratio_error(stats)
+                first_ratio_error(agent, stats)
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 

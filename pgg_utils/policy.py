@@ -192,10 +192,13 @@ def randomised(agent):
     return probed
 
 
-def first_ratio_error(stats: dict) -> None:
+def first_ratio_error(agent, stats: dict) -> None:
     """PathError where an update's first minibatch, computed before any optimizer step on the parameters that acted,
-    does not give the rollout's actions the rollout's log-probabilities (every ratio 1). A non-finite KL is left to
-    the run's own check of non-finite losses."""
+    does not give the rollout's actions the rollout's log-probabilities (every ratio 1). Not for an agent whose
+    training mode computes another function (BatchNorm's batch statistics, Dropout): its loss's policy is not the one
+    that acted, by design. A non-finite KL is left to the run's own check of non-finite losses."""
+    if mode_dependent(agent):
+        return
     kl = float(stats["losses/approx_kl"])
     if math.isfinite(kl) and kl > LIVE_MAX_KL:
         raise PathError(

@@ -122,7 +122,7 @@ def test_a_path_that_goes_stale_as_the_agent_trains_stops_at_the_next_update(tmp
     """The first minibatch of every update, before any step, must give the rollout's actions the rollout's
     log-probabilities; a stale rollout path breaks that from the second update on: one line, the checkpoints written
     before it kept, exit 1."""
-    done = train_fork(fork(tmp_path, *MEMOISED_NULL), tmp_path, "--guidance", "2")
+    done = train_fork(fork(tmp_path, *MEMOISED_NULL), tmp_path, "--guidance", "2", "--learning-rate", "0.01")
     line = one_line_error(done, 1)
     assert "the first minibatch's ratio is not 1" in line and "RolloutPolicy.act" in line
 
