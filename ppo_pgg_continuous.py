@@ -506,7 +506,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
     minibatch_size = batch_size // args.num_minibatches
 
     per_minibatch = defaultdict(list)  # averaged over every minibatch, as CleanRL does the clip fraction
-    for epoch in range(args.update_epochs):
+    for _ in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
             drop_mask = None  # PGG
@@ -514,8 +514,6 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
             mb_inds = b_inds[start : start + minibatch_size]
             loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
-            if epoch == 0 and start == 0:  # before any step, on the parameters that acted: every ratio is 1
-                first_ratio_error(agent, stats)
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
@@ -586,6 +584,7 @@ def train(args: Args, run: runs.Run) -> None:
     loss_fn = torch.compile(minibatch_loss) if args.compile else minibatch_loss
 
     batch_size = args.num_envs * args.num_steps
+    probe_rows = torch.arange(batch_size // args.num_minibatches)  # the rows of each iteration's ratio check
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
     schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
@@ -622,6 +621,9 @@ def train(args: Args, run: runs.Run) -> None:
             # a tensor, and the float is what trained the tables' runs.
             scheduled = args.compile and args.guidance_schedule != "constant"  # PGG
             loss_guidance = (torch.tensor(guidance) if scheduled else guidance) if guided else None  # PGG
+            # On the parameters that acted, the loss gives the rollout's actions the rollout's log-probs (ratio 1).
+            batch = flatten_rollout(buf, advantages, returns)
+            first_ratio_error(sys.modules[__name__], agent, batch, probe_rows, loss_guidance, args)
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
             stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
             schedule.observe(stats)  # PGG: the adaptive rule's step

@@ -192,14 +192,16 @@ def randomised(agent):
     return probed
 
 
-def first_ratio_error(agent, stats: dict) -> None:
-    """PathError where an update's first minibatch, computed before any optimizer step on the parameters that acted,
-    does not give the rollout's actions the rollout's log-probabilities (every ratio 1). Not for an agent whose
-    training mode computes another function (BatchNorm's batch statistics, Dropout): its loss's policy is not the one
-    that acted, by design. A non-finite KL is left to the run's own check of non-finite losses."""
+def first_ratio_error(script, agent, batch: dict, rows, guidance, args) -> None:
+    """PathError where the loss (`script.minibatch_loss` on the `rows` of the flattened rollout `batch`), computed
+    before the update on the parameters that acted, does not give the rollout's actions the rollout's
+    log-probabilities (every ratio 1). Not for an agent whose training mode computes another function (BatchNorm's
+    batch statistics, Dropout): its loss's policy is not the one that acted, by design, and a pass would move its
+    statistics. A non-finite KL is left to the run's own check of non-finite losses."""
     if mode_dependent(agent):
         return
-    kl = float(stats["losses/approx_kl"])
+    with torch.no_grad():
+        kl = float(script.minibatch_loss(agent, batch, rows, None, guidance, args)[1]["losses/approx_kl"])
     if math.isfinite(kl) and kl > LIVE_MAX_KL:
         raise PathError(
             f"the first minibatch's ratio is not 1 (approx_kl {kl:.3g} before any step): minibatch_loss's "
