@@ -272,6 +272,15 @@ def goal_gaps(goal: dict, variant: str, gammas: list[float]) -> list[str]:
     return gaps
 
 
+def marks(steps: dict, variants: list[str]) -> str:
+    """ "At 1M" where every variant's last mark is one step, else each variant's."""
+    if len({steps[v] for v in variants}) == 1:
+        return f"At {step_label(steps[variants[0]])}"
+    return (
+        "At each variant's last mark (" + "; ".join(f"{paper_name(v)}: {step_label(steps[v])}" for v in variants) + ")"
+    )
+
+
 def name(variant: str, nulls: dict) -> str:
     return f"{paper_name(variant)} ({nulls[variant]})"
 
@@ -329,8 +338,7 @@ def command_part(sets: Sets, values_out: list[dict]) -> list[str]:
     if gaps:
         lines += [(f"**Partial set:** {'; '.join(gaps)}. The tables below hold what there is; they are not the set's "
                    "result, and a verdict waits for the whole set."), ""]  # fmt: skip
-    steps = ", ".join(f"{paper_name(v)} {step_label(sets.command_steps[v])}" for v in variants)
-    lines += [(f"At the last mark ({steps}): eval γ {', '.join(f'{g:g}' for g in gammas)} (a variant's row is absent "
+    lines += [(f"{marks(sets.command_steps, variants)}: eval γ {', '.join(f'{g:g}' for g in gammas)} (a variant's row is absent "
                f"where it was not tracked at that γ); the bands: "
                + "; ".join(f"{band_name} {', '.join(f'{c:g}' for c in chosen)}" for band_name, chosen in bands)
                + " m/s (the training range is "
@@ -499,8 +507,7 @@ def goal_part(sets: Sets, values_out: list[dict]) -> list[str]:
     record_family(values_out, env, distance, "final distance")
     for variant in variants:
         record(values_out, env, variant, SECTION, "seeds", seeds_of(distance, variant))
-    steps = ", ".join(f"{paper_name(v)} {step_label(sets.goal_steps[v])}" for v in variants)
-    lines += [(f"The final distance to the goal at the last mark ({steps}; goal_distance.csv: the last observation's "
+    lines += [(f"{marks(sets.goal_steps, variants)}, the final distance to the goal (goal_distance.csv: the last observation's "
                "fingertip to target, the sweep's episodes), mean over seeds of the per-seed mean over episodes, and "
                f"against γ = 1 its change, Holm p (over these {sum(r['test'] is not None for r in distance)} tests) and "
                "the change one test detects: distance (change, p Holm; detectable); lower is closer."), "",
@@ -625,6 +632,9 @@ def figure(sets: Sets, path: Path) -> bool:
             band(ax, gammas, values, variant, name(variant, COMMAND_SET))
         ax.set_title(f"command task, {band_name} band ({', '.join(f'{c:g}' for c in chosen)} m/s)", fontsize=9)
         ax.set(xlabel="eval guidance γ", ylabel="tracking error (m/s)", xscale="log")
+        ticks = sorted({g for (v, s, g, c) in cells})
+        ax.set_xticks(ticks, [f"{g:g}" for g in ticks], fontsize=7)
+        ax.minorticks_off()
     if has_goal:
         ax = axes[-1]
         for variant in (v for v in GOAL_SET if any(k[0] == v for k in sets.goal)):
