@@ -17,7 +17,8 @@ condition (what the null differs by where it is used), and how far each state's 
 pseudo-condition (median over states): a null that is the policy at one fixed condition has its minimisers
 bunched there. A null on the whole state (PPO's, the paper's) is measured alike: π(a|∅) is then one action
 distribution for every state. Each checkpoint is loaded by the code that trained it and its task checked
-against the spaces it was trained on. One row per checkpoint; a few seconds each on one core.
+against the spaces it was trained on. One row per checkpoint: about 4 s each on the command task, 18 s on
+Reacher-v4, on one core.
 """
 
 import hashlib
