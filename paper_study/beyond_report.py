@@ -1083,8 +1083,10 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
     lines = ["## Guidance on a command", "",
              ("HalfCheetah told each episode how fast to run (`paper_study/cheetah_velocity.py`: a commanded forward "
               "velocity drawn from the training range, appended to the observation; reward v_cmd − |v − v_cmd| − "
-              "0.1·Σa²), trained with the null on the command (`--null-dims 17`: π(a|s, ∅) is a command-agnostic "
-              "policy, so γ > 1 amplifies what the command adds), with the paper's whole-state null, and as PPO, whose "
+              "0.1·Σa²), trained with the null on the command (`--null-dims 17`: π(a|s, ∅) cannot read the command, but "
+              "trained without dropping the command it acts as the policy at one fixed pseudo-command, so γ > 1 pushes "
+              "behaviour away from that command rather than amplifying what the command adds: \"What the learned null "
+              "is\", in the next section), with the paper's whole-state null, and as PPO, whose "
               "null is never trained (results/beyond/command, `run_all.sh`). Each agent at its last mark is given "
               "commands inside and outside the training range at each eval γ "
               "(`paper_study/command_tracking.py`: per episode the mean forward velocity over its 1000 steps; the "
@@ -1092,8 +1094,11 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
               "`tracking_error`, the reward's mean per-step |v_t − v_cmd|). A velocity command rather than a preference vector over "
               "objectives: a command has a target that an episode misses by a measured amount (how closely it "
               "follows, the analogue of a sample's fidelity to its prompt), a scalar command can be asked outside "
-              "its trained range, and it is the meta-RL literature's standard task; a preference has no target of "
-              "its own, only a point of a Pareto front to be estimated first (results/beyond/README.md).")]  # fmt: skip
+              "its trained range, and it is the meta-RL literature's velocity task, with three differences: there the "
+              "velocity is hidden and inferred from reward, the control cost is 0.05·Σa² and some code uses 200-step "
+              "episodes; here the command is observed, episodes last 1000 steps and the control cost is gymnasium's "
+              "0.1·Σa². A preference has no target of its own, only a point of a Pareto front to be estimated first "
+              "(results/beyond/README.md).")]  # fmt: skip
     tracking_csv = base / "tracking.csv"
     if not tracking_csv.exists():
         return [*lines, "", (f"**Not run yet:** {COMMAND_FOLDER}/tracking.csv does not exist (results/beyond/command/run_all.sh "
@@ -1124,6 +1129,7 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
                    f"{', '.join(f'{c:g}' for c in in_range)}, above it {', '.join(f'{c:g}' for c in above) or 'none'}, "
                    f"below it {', '.join(f'{c:g}' for c in below) or 'none'} (m/s); each seed's value is the mean over "
                    "its episodes and the commands named, then mean ± 95% CI over seeds.")]  # fmt: skip
+    lines += top_of_range_lines(cells, variants, high, env, values_out)
 
     # Question 1: tracking error and return against γ, each γ against γ = 1 on the same seeds and episodes.
     tests = []
@@ -1235,7 +1241,8 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
         lines += ["", ("**Does guidance extend the range of commands an agent can follow outside the training range?** "
                        "The tracking error over the commands above and below the training range at each eval γ, and "
                        "its change from γ = 1, paired by seed (t test, Holm over these "
-                       f"{len(tested)} tests): error (change, p Holm)."), "",
+                       f"{len(tested)} tests), and the change one test detects with 80% power at α = 0.05, before "
+                       "Holm: error (change, p Holm; detectable)."), "",
                   "| variant (null) | commands | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |",
                   "|---|---|" + "---|" * len(gammas)]  # fmt: skip
         for variant in variants:
@@ -1252,10 +1259,11 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
                         shown.append(f"{mean:.3f}")
                         continue
                     for quantity, value in (("change", r["test"]["difference"]), ("p", r["test"]["p"]),
-                                            ("p Holm", r["test"]["p_holm"])):  # fmt: skip
+                                            ("p Holm", r["test"]["p_holm"]), ("detectable", r["test"]["detectable"])):  # fmt: skip
                         record(values_out, env, variant, "γ 1", f"tracking error {side} the range {quantity} at "
                                f"γ {r['gamma']:g}", value)  # fmt: skip
-                    shown.append(f"{mean:.3f} ({r['test']['difference']:+.3f}, {fmt_p(r['test']['p_holm'])})")
+                    shown.append(f"{mean:.3f} ({r['test']['difference']:+.3f}, {fmt_p(r['test']['p_holm'])}; "
+                                 f"{r['test']['detectable']:.3f})")  # fmt: skip
                 lines.append(f"| {command_name(variant)} | {side} "
                              f"({', '.join(f'{c:g}' for c in chosen)}) | " + " | ".join(shown) + " |")  # fmt: skip
     lines += command_verdict(tests, knob, tested, gains, gaps)
@@ -1265,6 +1273,23 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
               f"![Commanded against achieved velocity, one line per eval γ]({COMMAND_FOLDER}/command_tracking.png)"]  # fmt: skip
     lines += command_sweep_lines(base, env)
     return [*lines, ""]
+
+
+def top_of_range_lines(cells: dict, variants: list[str], top: float, env: str, values_out: list[dict]) -> list[str]:
+    """How fast the agents run at γ = 1 when commanded the top of the training range: whether they cover it, which
+    the tests outside the range presume."""
+    speeds = {v: per_seed(cells, v, 1.0, [top], 1) for v in variants}
+    every = [speed for v in variants for speed in speeds[v].values()]
+    if not every:
+        return []
+    means = {v: float(np.mean(list(seeds.values()))) for v, seeds in speeds.items() if seeds}
+    for variant, baseline, value in (("", "command", np.mean(every)), *((v, "", m) for v, m in means.items())):
+        record(values_out, env, variant, baseline, f"velocity at command {top:g} at γ 1", value)
+    return ["", (f"At γ = 1 the agents commanded the top of the range ({top:g} m/s) run at {np.mean(every):.2f} m/s on "
+                 f"average ({min(every):.2f} to {max(every):.2f} over the {len(every)} agents; "
+                 + "; ".join(f"{command_name(v)} {m:.2f}" for v, m in means.items())
+                 + "): they do not cover the training range, so the tests above it are made on agents that do not "
+                 "reach its top.")]  # fmt: skip
 
 
 def command_verdict(
@@ -1309,10 +1334,15 @@ def command_verdict(
             for v in gains if gains[v].get(1.0) and gains[v].get(lowest)))  # fmt: skip
     significant = [r for r in outside if r["p_holm"] < ALPHA]
     parts.append(f". Outside the training range, {len(significant)} of the {len(outside)} tests of a γ against γ = 1 "
-                 "find a significant change in tracking error after Holm. What they cannot say: a change smaller than "
-                 f"one test detects with {COMMAND_SEEDS} seeds (the detectable columns, before Holm: after it, more is "
-                 "needed; outside the range none is computed), anything of another task, or of a command of more "
-                 "than one dimension.")  # fmt: skip
+                 "find a significant change in tracking error after Holm")  # fmt: skip
+    if outside:
+        detectable = [t["detectable"] for t in outside]
+        parts.append(f"; one test there detects {min(detectable):.3f} to {max(detectable):.3f} m/s before "
+                     "Holm, so changes of the sizes seen (up to "
+                     f"{max(t['difference'] for t in outside):+.3f} m/s) can go unfound")  # fmt: skip
+    parts.append(f". What they cannot say: a change smaller than one test detects with {COMMAND_SEEDS} seeds (the "
+                 "detectable columns and figures, before Holm: after it, more is needed), anything of another task, or "
+                 "of a command of more than one dimension.")  # fmt: skip
     return ["", "".join(parts)]
 
 
@@ -1434,9 +1464,16 @@ def report(args: Args) -> list[Path]:
     lines += cloning_section(cloning_tests, cloning_fresh_tests(means, variants_of, folder), values)
     lines += question_3_reading(values)
     lines += command_section(folder, values)
+    # Imported here: the section's module builds on this one's readers and tests.
+    from paper_study import condition_dropout
+
+    dropout = condition_dropout.read(folder)
+    lines += condition_dropout.section(dropout, values)
     written = [folder / "report.md", folder / "report.csv", folder / "report_values.csv", folder / "gamma_response.png"]
     if command_figure(folder, folder / COMMAND_FOLDER / "command_tracking.png"):
         written.append(folder / COMMAND_FOLDER / "command_tracking.png")
+    if condition_dropout.figure(dropout, folder / condition_dropout.FIGURE):
+        written.append(folder / condition_dropout.FIGURE)
     if trajectories:
         written.append(folder / "guidance_trajectory.png")
         trajectory_figure(trajectories, written[-1])

@@ -374,7 +374,10 @@ def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
                  *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/episodes.csv"),
                  *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_gamma.csv"),
                  *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_fresh.csv"),
-                 *beyond.glob(f"{beyond_report.COMMAND_FOLDER}/*.csv")]:  # fmt: skip
+                 *beyond.glob(f"{beyond_report.COMMAND_FOLDER}/*.csv"), *beyond.glob("*/learned_null.csv"),
+                 *beyond.glob(f"{beyond_report.DROPOUT_FOLDER}/*.csv"),
+                 *beyond.glob(f"{beyond_report.DROPOUT_FOLDER}/*/tracking.csv"),
+                 *beyond.glob(f"{beyond_report.DROPOUT_FOLDER}/*/learned_null.csv")]:  # fmt: skip
         (tmp_path / path.relative_to(beyond)).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / path.relative_to(beyond)).write_bytes(path.read_bytes())
     continuous = ROOT / "results" / "continuous"

@@ -116,3 +116,43 @@ def test_the_figure_draws_a_line_per_gamma_in_a_panel_per_variant(tmp_path, monk
     assert sorted(filter(None, lines)) == sorted(f"γ = {g:g}" for g in GAMMAS for _ in range(3))
     with open(tmp_path / "beyond" / "command" / "tracking.csv", newline="") as f:
         assert len(list(csv.DictReader(f))) == 3 * 5 * 3 * 5 * 2
+
+
+def test_the_tests_outside_the_range_say_what_they_can_detect(tmp_path):
+    """Each test outside the training range carries the change it detects with 80% power (the paired test's, before
+    Holm), in its cell and in report_values.csv, and the verdict gives their span: a test that finds nothing says
+    how large a change it could have missed."""
+    text, values = section(tmp_path, tracking_rows())
+    detectable = {(variant, q): v for (variant, baseline, q), v in values.items() if baseline == "γ 1"
+                  and q.startswith("tracking error above the range detectable")}  # fmt: skip
+    assert len(detectable) == 3 * 2 and all(v > 0 for v in detectable.values())
+    change = values[("ppo", "γ 1", "tracking error above the range change at γ 2")]
+    p_holm = values[("ppo", "γ 1", "tracking error above the range p Holm at γ 2")]
+    shown = values[("ppo", "γ 1", "tracking error above the range detectable at γ 2")]
+    assert f"({change:+.3f}, {beyond_report.fmt_p(p_holm)}; {shown:.3f})" in text
+    every = [v for (_, b, q), v in values.items() if b == "γ 1" and "the range detectable" in q]
+    verdict = next(line for line in text.splitlines() if line.startswith("**What these tests say, and no more.**"))
+    assert f"one test there detects {min(every):.3f} to {max(every):.3f} m/s before Holm" in verdict
+    assert "none is computed" not in verdict
+
+
+def test_the_section_says_how_fast_agents_run_at_the_top_of_the_range(tmp_path):
+    """At γ = 1 and the largest command inside the range (2), the mean achieved velocity over every agent, and per
+    variant, from the episodes: whether the agents cover the range the tests above it presume."""
+    text, values = section(tmp_path, tracking_rows())
+    speeds = {v: [np.mean([achieved(v, s, 1.0, 2.0, e) for e in range(2)]) for s in range(1, 6)]
+              for v in beyond_report.COMMAND_VARIANTS}  # fmt: skip
+    every = [x for v in speeds for x in speeds[v]]
+    assert values[("", "command", "velocity at command 2 at γ 1")] == pytest.approx(np.mean(every))
+    assert values[("ppo", "", "velocity at command 2 at γ 1")] == pytest.approx(np.mean(speeds["ppo"]))
+    assert (
+        f"run at {np.mean(every):.2f} m/s on average ({min(every):.2f} to {max(every):.2f} over the 15 agents" in text
+    )
+
+
+def test_the_task_text_states_what_the_null_is_and_how_the_task_differs_from_the_literatures(tmp_path):
+    """The command null trained without dropout is not called command-agnostic, and the task's differences from the
+    meta-RL literature's velocity task (hidden command, control cost, episode length) are stated."""
+    text, _ = section(tmp_path, tracking_rows())
+    assert "command-agnostic" not in text and "acts as the policy at one fixed pseudo-command" in text
+    assert "the velocity is hidden and inferred from reward, the control cost is 0.05·Σa²" in text

@@ -172,7 +172,12 @@ BEYOND_SOURCES = [
     (W, CLONING, PPO, "fresh fall p Holm"), None,  # γ_train 1.1
     (U, CLONING, CON, "fresh fall difference (pts)"), (U, CLONING, CON, "fresh fall p Holm"),
     None, None, None, (CMD, CON, "γ 1", "tracking error change at γ 1.25"),  # above 1: γ > 1, γ 1.25
-    (CMD, CON, "γ 1", "tracking error p Holm at γ 1.25"), None,  # below 1
+    (CMD, CON, "γ 1", "tracking error p Holm at γ 1.25"),
+    (CMD, NULL17, "γ 1", "tracking error above the range detectable at γ 1.25"),  # the least one test detects above
+    (CMD, CON, "γ 1", "tracking error above the range detectable at γ 1.25"),  # the most
+    (CMD, NULL17, "γ 1", "tracking error above the range change at γ 3"),
+    (CMD, NULL17, "γ 1", "tracking error above the range p at γ 3"),
+    (CMD, "", "command", "velocity at command 2 at γ 1"), None,  # below 1
     (CMD, NULL17, CON, "knob change at γ 0.5"), (CMD, NULL17, CON, "baseline's knob change at γ 0.5"),
     (CMD, NULL17, CON, "knob p Holm at γ 0.5"), (CMD, NULL17, "", "gain at γ 0.5"), (CMD, CON, "", "gain at γ 0.5"),
 ]  # fmt: skip
