@@ -107,6 +107,7 @@ from paper_study.summary import (
     read_provenance,
     seeds_short,
     short_cells_note,
+    short_configurations_note,
     summarise,
     table_csv,
 )
@@ -570,8 +571,9 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     provenance = read_provenance(args.provenance)
     episodes = read_episodes(args.sweeps)
     summary = summarise(select_mode(episodes, args.policy, args.null_branch), provenance)
-    if note := short_cells_note(summary):
-        print(note, file=sys.stderr)
+    for note in (short_cells_note(summary), short_configurations_note(summary)):
+        if note:
+            print(note, file=sys.stderr)
     if len({(r["policy"], r["null_branch"]) for r in episodes}) > 1:
         write(output / "controls.md", controls_table(summarise(episodes, provenance)), written)
     if args.provenance:
