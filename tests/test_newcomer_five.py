@@ -3,13 +3,16 @@ seed lost from a whole configuration, a manifest that could delete a user's file
 word on a user's own tasks; the loud cases, each one line naming its real cause; and the field's habits
 (Stable-Baselines3's `predict`, a per-call seed)."""
 
+import matplotlib
 import numpy as np
 import pytest
 import torch
 from conftest import SCRIPTS
-from test_plots import SEED_MEANS, episode_rows, write_episodes
+from test_plots import SEED_MEANS, episode_rows, summary_of, write_episodes
 
 import plot_results as plots
+from paper_study import figures
+from pgg_utils.files import MANIFEST, read_csv, read_manifest, sha256_of
 
 # --- silent: act's noise --------------------------------------------------------------------------
 
@@ -39,7 +42,10 @@ def test_act_names_noise_of_the_wrong_shape_and_the_shape_it_needs(kind):
         agent.act(np.zeros((5, 4)), 1.0, noise=np.zeros(3))
     assert str(refused.value) == "noise has shape (3,); for 5 observations the agent's noise is (5, 3)"
     state = torch.get_rng_state()
-    assert agent.act(np.zeros(4), 1.0, noise=np.zeros(3)).shape == agent.act(np.zeros(4), 1.0, noise=np.zeros((1, 3))).shape
+    assert (
+        agent.act(np.zeros(4), 1.0, noise=np.zeros(3)).shape
+        == agent.act(np.zeros(4), 1.0, noise=np.zeros((1, 3))).shape
+    )
     assert torch.equal(torch.get_rng_state(), state)  # checking the shape draws nothing from torch's generator
 
 
@@ -61,3 +67,79 @@ def test_a_configuration_short_of_a_seed_in_every_cell_is_marked_against_the_oth
     assert table.count("(2 of 3 seeds)") == 4  # CartPole's four PGG cells, at two steps and two γ
     assert "467.0 ± 12.7 (2 of 3 seeds)" in table
     assert "(2 of 3 seeds)" in (tmp_path / "out" / "table_discrete.tex").read_text()
+
+
+# --- silent: outputs.txt names only files plot_results.py wrote ------------------------------------
+
+
+def test_a_rerun_never_deletes_a_file_named_in_outputs_txt_by_hand_or_edited_since(tmp_path, capsys):
+    """A name added to outputs.txt by hand made the next plot_results.py run delete that file of the user's: the
+    manifest records each output's sha256, and a rerun removes only the files that are still the bytes it wrote."""
+    both = {("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272], ("Hopper-v4", "ppo", 200000, 1.0): [1000, 1100, 1200]}
+    write_episodes(tmp_path / "both.csv", episode_rows(both))
+    write_episodes(tmp_path / "cartpole.csv", episode_rows({k: v for k, v in both.items() if k[0] == "CartPole-v1"}))
+    out = tmp_path / "out"
+
+    def run(sweep: str) -> list:
+        return plots.generate(plots.Args(sweeps=(str(tmp_path / sweep),), output=str(out)))
+
+    run("both.csv")
+    (out / "my_notes.md").write_text("the user's")
+    (out / "table_continuous.md").write_text("the user's edit of a table")
+    with open(out / MANIFEST, "a") as manifest:
+        manifest.write("my_notes.md\n" + "0" * 64 + "  fig_continuous_ppo.png\n")  # by hand, a digest forged too
+    capsys.readouterr()
+    run("cartpole.csv")
+    err = capsys.readouterr().err
+    assert (out / "my_notes.md").read_text() == "the user's"
+    assert (out / "table_continuous.md").read_text() == "the user's edit of a table"
+    assert (out / "fig_continuous_ppo.png").exists() and not (out / "fig_continuous_ppo.pdf").exists()
+    for name in ("fig_continuous_ppo.png", "my_notes.md", "table_continuous.md"):
+        assert f"note: kept {out / name}: {out / MANIFEST} lists it, but not as the file a previous run wrote" in err
+    assert f"note: removed {out / 'fig_continuous_ppo.pdf'}" in err
+    assert not {"my_notes.md", "table_continuous.md", "fig_continuous_ppo.png"} & set(read_manifest(out))
+    assert read_manifest(out)["table_discrete.md"] == sha256_of(out / "table_discrete.md")
+
+
+# --- silent: the aggregates on a user's own tasks ------------------------------------------------
+
+
+def test_aggregates_on_a_task_the_paper_did_not_run_normalise_by_the_sweeps_own_ppo(tmp_path, capsys):
+    """LunarLander or Swimmer got no aggregate IQM and no performance profile, without a word: where the paper has
+    no row, the sweep's own PPO at γ = 1 is the reference (0 at its first step, 1 at its last), and the table and
+    figures say which reference each task's scores use; a task with neither is named in one printed line."""
+    means = {("MyTask-v0", "ppo", 1000, 1.0): [9, 10, 11], ("MyTask-v0", "ppo", 2000, 1.0): [19, 20, 21],
+             ("MyTask-v0", "pgg_g1.1", 2000, 1.0): [24, 25, 26], ("MyTask-v0", "pgg_g1.1", 2000, 2.0): [29, 30, 31],
+             ("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272], ("CartPole-v1", "ppo", 200000, 1.0): [300, 301, 302],
+             ("Other-v0", "pgg_g1.1", 1000, 1.0): [1, 2, 3]}  # fmt: skip
+    write_episodes(tmp_path / "episodes.csv", episode_rows(means, action_space="discrete"))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "episodes.csv"),), output=str(tmp_path / "out")))
+    err = capsys.readouterr().err
+    assert ("note: the aggregate IQM and performance profile leave out the tasks with no reference to normalise by "
+            "(Other-v0: the paper has no row for it and the sweep holds no PPO at eval γ = 1)") in err  # fmt: skip
+    aggregate = {
+        (r["variant"], r["step"], r["eval_guidance"]): r for r in read_csv(tmp_path / "out" / "aggregate_iqm.csv")
+    }
+    assert float(aggregate[("pgg_g1.1", "2000", "2.0")]["iqm"]) == 2.0  # (30 - 10) / (20 - 10), MyTask's alone
+    assert aggregate[("pgg_g1.1", "2000", "2.0")]["n_envs"] == "1"
+    said = ("0 = PPO at its first step, 1 = at its last: the paper's PPO for CartPole-v1; this sweep's PPO at γ = 1 "
+            "for MyTask-v0")  # fmt: skip
+    assert f"Scores normalised per task: {said}." in (tmp_path / "out" / "aggregate_iqm.md").read_text()
+    summary = summary_of(tmp_path / "episodes.csv")
+    assert said in figures.aggregate_intervals(plots.aggregate_iqm(summary), "discrete", said).axes[0].get_xlabel()
+    assert (tmp_path / "out" / "performance_profile_discrete.png").exists()
+
+
+def test_the_performance_profile_spans_the_scores_range(tmp_path):
+    """Its τ axis ran from below 0 to past 1 whatever the scores (−4 to 8 on the continuous tables, with the
+    informative region squeezed): it spans the scores, as rliable's own plots do."""
+    write_episodes(tmp_path / "episodes.csv", episode_rows(SEED_MEANS))
+    summary = summary_of(tmp_path / "episodes.csv")
+    profiles, step, envs = plots.performance_profiles(summary)
+    scores = np.concatenate(
+        [np.concatenate(s) for (_, at, _), s in plots.normalised_scores(summary).items() if at == step]
+    )
+    fig = figures.performance_profiles(profiles, step, envs, "discrete")
+    for ax in (ax for ax in fig.axes if ax.get_visible()):
+        assert ax.get_xlim() == pytest.approx((scores.min(), scores.max()))
+    matplotlib.pyplot.close(fig)
