@@ -623,6 +623,10 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     provenance = read_provenance(args.provenance)
     episodes = read_episodes(args.sweeps)
     summary = summarise(select_mode(episodes, args.policy, args.null_branch), provenance)
+    steps = sorted({int(r["step"]) for r in summary})
+    if args.response_step is not None and args.response_step not in steps:
+        raise InputError(f"--response-step {args.response_step}: the sweeps hold no checkpoint at that step "
+                         f"(their steps: {', '.join(map(str, steps))})")  # fmt: skip
     for note in (short_cells_note(summary), short_configurations_note(summary)):
         if note:
             print(note, file=sys.stderr)

@@ -391,6 +391,11 @@ def gamma_response(summary, envs, step):
     for ax, env in zip(axes, envs):
         env_rows = [r for r in summary if r["env_id"] == env]
         at = step if step is not None else max(int(r["step"]) for r in env_rows)
+        if not any(int(r["step"]) == at for r in env_rows):  # a step another task of the sweep was swept at
+            ax.text(0.5, 0.5, f"not swept at {step_label(at)} steps", ha="center", va="center", transform=ax.transAxes,
+                    fontsize=9, color="0.45")  # fmt: skip
+            style_axis(ax, env, "eval guidance γ (log scale)", "return", steps_on_x=False)
+            continue
         few = few_seeds(env_rows)
         drawn = []
         for variant, series in ordered_series(env_rows):

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 from conftest import SCRIPTS
-from test_plots import SEED_MEANS, episode_rows, summary_of, write_episodes
+from test_plots import SEED_MEANS, episode_rows, one_error_line, run_cli, summary_of, write_episodes
 
 import plot_results as plots
 from paper_study import figures
@@ -143,3 +143,36 @@ def test_the_performance_profile_spans_the_scores_range(tmp_path):
     for ax in (ax for ax in fig.axes if ax.get_visible()):
         assert ax.get_xlim() == pytest.approx((scores.min(), scores.max()))
     matplotlib.pyplot.close(fig)
+
+
+# --- loud --------------------------------------------------------------------------------------------
+
+
+def test_a_response_step_the_sweep_lacks_is_one_line_and_a_task_without_it_says_so_in_its_panel(tmp_path):
+    """`--response-step 12345` raised an IndexError traceback in figures.seeds_label; a step that one task of the
+    sweep holds and another does not crashed the same way."""
+    write_episodes(tmp_path / "sweep" / "episodes.csv", episode_rows(SEED_MEANS))
+    one_error_line(run_cli(tmp_path / "sweep", "--output", tmp_path / "o", "--response-step", "12345"),
+                   "--response-step 12345: the sweeps hold no checkpoint at that step (their steps: 100000, 200000)")  # fmt: skip
+    summary = [r for r in summary_of(tmp_path / "sweep") if not (r["env_id"] == "Acrobot-v1" and r["step"] == 200000)]
+    fig = figures.gamma_response(summary, ["Acrobot-v1", "CartPole-v1"], 200000)
+    assert [t.get_text() for t in fig.axes[0].texts] == ["not swept at 200k steps"] and fig.axes[1].get_lines()
+    matplotlib.pyplot.close(fig)
+
+
+def test_two_sweeps_of_the_same_checkpoints_with_other_eval_seeds_are_other_episodes(tmp_path):
+    """`plot_results.py s1 s2` on sweeps made with --eval-seed 10000 and 20000 was refused with "episode 0 of run …
+    appears in both …: pass each sweep once", though each was passed once and their episodes differ: an episode is
+    its reset seed, so the two pool as one sweep of twice the episodes would; a reset seed in both is refused."""
+    cell = {("CartPole-v1", "ppo", 100000, 1.0): [100.0, 200.0]}
+    write_episodes(tmp_path / "s1" / "episodes.csv", episode_rows(cell))
+    fresh = [r | {"episode_seed": r["episode_seed"] + 10_000, "return": r["return"] + 10} for r in episode_rows(cell)]
+    write_episodes(tmp_path / "s2" / "episodes.csv", fresh)
+    (row,) = summary_of(tmp_path / "s1", tmp_path / "s2")
+    assert (row["n_episodes"], row["seed_means"]) == (8, "105.0000;205.0000")
+    overlapping = [r | {"episode_seed": r["episode_seed"] + 1} for r in episode_rows(cell)]  # --eval-seed 10001
+    write_episodes(tmp_path / "s3" / "episodes.csv", overlapping)
+    with pytest.raises(plots.InputError) as refused:
+        plots.read_episodes([tmp_path / "s1", tmp_path / "s3"])
+    assert str(refused.value).startswith("episode 0 (reset seed 10001) of run CartPole-v1__ppo__s1 (100000 1.0 sample ")
+    assert str(refused.value).endswith("s3/episodes.csv: one episode counted twice; pass each sweep once")
