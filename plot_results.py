@@ -163,11 +163,12 @@ USAGE = ("usage: plot_results.py SWEEP [SWEEP ...] [--output DIR] [--runs RUN ..
 
 
 def run_args_files(run_paths) -> list[Path]:
-    """The args.json of each run: a folder holding one is a run, any other folder every run below it."""
+    """The args.json of each run: a folder holding one is a run, any other folder every run below it (links to
+    run directories followed)."""
     found = []
     for raw in run_paths:
         path = Path(raw)
-        found.extend([path / "args.json"] if (path / "args.json").is_file() else sorted(path.rglob("args.json")))
+        found.extend([path / "args.json"] if (path / "args.json").is_file() else files.files_under(path, "args.json"))
     return found
 
 

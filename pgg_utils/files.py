@@ -55,6 +55,20 @@ def one_line_errors():
         sys.exit(exit_status(e))
 
 
+def files_under(folder: Path, pattern: str) -> list[Path]:
+    """The files below `folder` whose path ends as `pattern` does (Path.match: `checkpoints/step_*.pt`), sorted.
+    Links to folders are followed, each folder searched once, so that a folder of symlinks to run directories is
+    searched as the run directories are (Path.rglob follows none) and a link cycle ends."""
+    found, searched = [], set()
+    for root, folders, names in os.walk(folder, followlinks=True):
+        if os.path.realpath(root) in searched:
+            folders[:] = []
+            continue
+        searched.add(os.path.realpath(root))
+        found += [Path(root) / name for name in names if (Path(root) / name).match(pattern)]
+    return sorted(found)
+
+
 @contextlib.contextmanager
 def replacing(path: Path, tmp_suffix: str = ".tmp"):
     """Yields a temporary path beside `path` (its name + `tmp_suffix`: a writer that picks the format by

@@ -3,6 +3,8 @@ seed lost from a whole configuration, a manifest that could delete a user's file
 word on a user's own tasks; the loud cases, each one line naming its real cause; and the field's habits
 (Stable-Baselines3's `predict`, a per-call seed)."""
 
+from pathlib import Path
+
 import matplotlib
 import numpy as np
 import pytest
@@ -10,9 +12,14 @@ import torch
 from conftest import SCRIPTS
 from test_plots import SEED_MEANS, episode_rows, one_error_line, run_cli, summary_of, write_episodes
 
+import eval_gamma_sweep as sweep
 import plot_results as plots
 from paper_study import figures
+from pgg_utils import checkpoints
 from pgg_utils.files import MANIFEST, read_csv, read_manifest, sha256_of
+
+FORMAT_2 = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
+
 
 # --- silent: act's noise --------------------------------------------------------------------------
 
@@ -176,3 +183,22 @@ def test_two_sweeps_of_the_same_checkpoints_with_other_eval_seeds_are_other_epis
         plots.read_episodes([tmp_path / "s1", tmp_path / "s3"])
     assert str(refused.value).startswith("episode 0 (reset seed 10001) of run CartPole-v1__ppo__s1 (100000 1.0 sample ")
     assert str(refused.value).endswith("s3/episodes.csv: one episode counted twice; pass each sweep once")
+
+
+def test_a_folder_of_symlinks_to_run_directories_sweeps_as_the_runs_do(tmp_path):
+    """ "no checkpoints (checkpoints/step_*.pt) under links/", though each symlink passed alone worked: Path.rglob
+    follows no link to a folder. A link cycle ends the search instead of looping."""
+    links = tmp_path / "links"
+    links.mkdir()
+    (links / "cartpole").symlink_to(FORMAT_2.parent.parent, target_is_directory=True)
+    (links / "cartpole_again").symlink_to(links, target_is_directory=True)  # a cycle
+    assert checkpoints.find_checkpoints([links]) == [links / "cartpole" / "checkpoints" / FORMAT_2.name]
+    args = {"gammas": (1.0,), "episodes": 2}
+    together = sweep.sweep(sweep.Args(paths=(str(links),), output=str(tmp_path / "together"), **args))
+    alone = sweep.sweep(sweep.Args(paths=(str(links / "cartpole"),), output=str(tmp_path / "alone"), **args))
+    assert (together / "episodes.csv").read_text() == (alone / "episodes.csv").read_text()
+    (tmp_path / "elsewhere" / "run").mkdir(parents=True)
+    (tmp_path / "elsewhere" / "run" / "args.json").write_text("{}")
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "runs" / "run").symlink_to(tmp_path / "elsewhere" / "run", target_is_directory=True)
+    assert plots.run_args_files([tmp_path / "runs"]) == [tmp_path / "runs" / "run" / "args.json"]
