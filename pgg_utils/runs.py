@@ -96,7 +96,9 @@ class Run:
         args = self.args
         latest, unreadable = self.last_readable_checkpoint() if not args.overwrite else (None, [])
         if not args.overwrite and (error := record_error(self.dir, self.loaded if latest else None)):
-            raise RunDirError(f"{error}: restore it, or pass --overwrite to start over")
+            raise RunDirError(
+                self.foreign_checkpoint(latest) or f"{error}: restore it, or pass --overwrite to start over"
+            )
         if latest is not None:
             self.check_continuable(latest)
         elif unreadable and not args.resume:
@@ -146,6 +148,20 @@ class Run:
         if differing := self.differing(recorded):
             raise RunDirError(f"{self.dir} holds {what} of a run with other arguments ({', '.join(differing)}): "
                               "choose another --run-name, or pass --overwrite to replace them")  # fmt: skip
+
+    def foreign_checkpoint(self, latest: Path | None) -> str | None:
+        """Why `latest`, which disagrees with args.json, is the odd one out where args.json holds this command's own
+        training arguments: a checkpoint of another run copied in (one line naming it, not args.json), or None."""
+        try:
+            recorded = read_args_json(self.dir)
+        except ValueError:
+            return None
+        if latest is None or recorded is None or self.differing(recorded):
+            return None
+        theirs = ", ".join(self.differing(self.loaded.get("args", {})))
+        return (f"{latest} is not this run's checkpoint: it was written by run {self.loaded.get('run', '?')} "
+                f"({theirs}: as recorded -> as {self.dir / 'args.json'} and this command have it); move it out of "
+                f"{latest.parent}, or pass --overwrite to start over")  # fmt: skip
 
     def last_readable_checkpoint(self) -> tuple[Path | None, list[tuple[Path, str]]]:
         """(the last checkpoint that loads, [(each later one that does not, why)]) (last_readable). Reads,

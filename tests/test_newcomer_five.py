@@ -3,19 +3,22 @@ seed lost from a whole configuration, a manifest that could delete a user's file
 word on a user's own tasks; the loud cases, each one line naming its real cause; and the field's habits
 (Stable-Baselines3's `predict`, a per-call seed)."""
 
+import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import matplotlib
 import numpy as np
 import pytest
 import torch
-from conftest import SCRIPTS
+from conftest import SCRIPTS, small_args, train
 from test_plots import SEED_MEANS, episode_rows, one_error_line, run_cli, summary_of, write_episodes
 
 import eval_gamma_sweep as sweep
 import plot_results as plots
+import ppo_pgg_discrete
 from paper_study import figures
-from pgg_utils import checkpoints
+from pgg_utils import checkpoints, rundir, runs
 from pgg_utils.files import MANIFEST, read_csv, read_manifest, sha256_of
 
 FORMAT_2 = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
@@ -202,3 +205,22 @@ def test_a_folder_of_symlinks_to_run_directories_sweeps_as_the_runs_do(tmp_path)
     (tmp_path / "runs").mkdir()
     (tmp_path / "runs" / "run").symlink_to(tmp_path / "elsewhere" / "run", target_is_directory=True)
     assert plots.run_args_files([tmp_path / "runs"]) == [tmp_path / "runs" / "run" / "args.json"]
+
+
+def test_resume_on_a_folder_holding_another_runs_checkpoint_names_the_checkpoint(tmp_path):
+    """--resume where another run's checkpoint was copied in is refused (right), but the line blamed args.json
+    ("args.json disagrees with the run's checkpoints: seed 1 (checkpoints: 2): restore it"), which is this run's."""
+    args = small_args("discrete", tmp_path)
+    mine = train(ppo_pgg_discrete, args)
+    for later in (1024, 1536):  # as if stopped after its first checkpoint
+        checkpoints.checkpoint_path(mine, later).unlink()
+    theirs = train(ppo_pgg_discrete, replace(args, seed=2))
+    foreign = checkpoints.checkpoint_path(mine, 1024)
+    shutil.copy(checkpoints.checkpoint_path(theirs, 1024), foreign)
+    with pytest.raises(rundir.RunDirError) as refused:
+        runs.Run.prepare(replace(args, resume=True), "discrete", Path(ppo_pgg_discrete.__file__))
+    assert str(refused.value) == (
+        f"{foreign} is not this run's checkpoint: it was written by run {theirs.name} (seed 2 -> 1: as recorded -> "
+        f"as {mine / 'args.json'} and this command have it); move it out of {foreign.parent}, or pass --overwrite "
+        "to start over"
+    )
