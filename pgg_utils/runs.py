@@ -8,6 +8,7 @@ import math
 import os
 import sys
 import threading
+import traceback
 from collections import deque
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -348,12 +349,27 @@ def train_in_process(script, args) -> Path:
     return run.dir
 
 
+# gymnasium's vector envs, through whose step and reset a sub-env's (the task's) exception reaches training
+VECTOR_ENV_FILES = ("sync_vector_env.py", "async_vector_env.py")
+
+
+def task_failure(error: BaseException) -> str | None:
+    """`the task raised X: its message, in its step()` where `error` came out of a sub-env's step or reset through
+    gymnasium's vector env (the task's own code, or a wrapper on it), as the sweep says of its episodes; None for
+    any other error (the training script's own, whose traceback is the report)."""
+    calls = [f.name for f in traceback.extract_tb(error.__traceback__) if Path(f.filename).name in VECTOR_ENV_FILES]
+    if not any(call in ("step", "reset") for call in calls):
+        return None
+    message = f"{type(error).__name__}: {str(error).splitlines()[0]}" if str(error) else type(error).__name__
+    return f"the task raised {message}, in its {next(c for c in calls if c in ('step', 'reset'))}()"
+
+
 def launch(args, kind: str, script: str, train) -> None:
     """A training script's `main` after parsing: checks every argument before the disk is touched,
     prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
     files.exit_status's rule: exit 2 for bad arguments or a run directory that must not be used or
-    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts) or a non-finite run
-    (its earlier checkpoints kept)."""
+    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts), a non-finite run or a
+    task that raises in its step or reset (task_failure; the earlier checkpoints kept, and named)."""
     error, status = argument_error(args, kind), 2
     run = None
     if error is None:
@@ -399,6 +415,14 @@ def launch(args, kind: str, script: str, train) -> None:
             message = e.strerror if written else f"cannot write {events[-1] if events else run.dir}: {e.strerror or e}"
             message += f"; checkpoints up to {latest.name} are kept" if latest else ""
         print(f"error: {message}", file=sys.stderr)
+        sys.exit(1)
+    except Exception as e:
+        if (failed := task_failure(e)) is None:
+            raise  # the script's own fault: its traceback is the report
+        latest = latest_checkpoint(run.dir)
+        kept = f"checkpoints up to {latest.name} are kept: fix the task and continue with --resume" if latest else (
+            "no checkpoint was written: fix the task and start it again")  # fmt: skip
+        print(f"error: {failed} while {run.dir} trained; {kept}", file=sys.stderr)
         sys.exit(1)
     finally:
         run.close()

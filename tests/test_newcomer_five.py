@@ -7,6 +7,7 @@ import shutil
 from dataclasses import replace
 from pathlib import Path
 
+import gymnasium as gym
 import matplotlib
 import numpy as np
 import pytest
@@ -224,3 +225,42 @@ def test_resume_on_a_folder_holding_another_runs_checkpoint_names_the_checkpoint
         f"as {mine / 'args.json'} and this command have it); move it out of {foreign.parent}, or pass --overwrite "
         "to start over"
     )
+
+
+class FailingCartPole(gym.Wrapper):
+    """CartPole whose step raises from its 150th call on: a custom task's bug, met after the first checkpoint."""
+
+    def __init__(self, render_mode=None):
+        super().__init__(gym.make("CartPole-v1", render_mode=render_mode))
+        self.steps = 0
+
+    def step(self, action):
+        self.steps += 1
+        if self.steps >= 150:
+            raise RuntimeError("the pole's sensor failed\nsecond line")
+        return self.env.step(action)
+
+
+def test_a_task_that_raises_in_step_during_training_is_one_line_naming_the_checkpoints_kept(tmp_path, capsys):
+    """A custom task raising inside step() gave a full traceback and no line saying which checkpoints are kept (the
+    sweep said the same task's fault in one line); an error of the script's own still shows its traceback."""
+    gym.register("FailingCartPole-v0", entry_point=FailingCartPole, max_episode_steps=500)
+    try:
+        args = small_args("discrete", tmp_path, env_id="FailingCartPole-v0", guidance=1.0, cond_dropout=0.0)
+        with pytest.raises(SystemExit) as stopped:
+            runs.launch(args, "discrete", ppo_pgg_discrete.__file__, ppo_pgg_discrete.train)
+    finally:
+        gym.registry.pop("FailingCartPole-v0")
+    err = capsys.readouterr().err
+    (run_dir,) = tmp_path.iterdir()
+    assert stopped.value.code == 1 and "Traceback" not in err
+    assert err.strip().splitlines()[-1] == (
+        f"error: the task raised RuntimeError: the pole's sensor failed, in its step() while {run_dir} trained; "
+        "checkpoints up to step_000000512.pt are kept: fix the task and continue with --resume"
+    )
+
+    def broken(args, run):
+        raise KeyError("the script's own bug")
+
+    with pytest.raises(KeyError):
+        runs.launch(replace(args, env_id="CartPole-v1"), "discrete", ppo_pgg_discrete.__file__, broken)
