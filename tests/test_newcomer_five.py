@@ -12,7 +12,7 @@ import matplotlib
 import numpy as np
 import pytest
 import torch
-from conftest import SCRIPTS, small_args, train
+from conftest import ROOT, SCRIPTS, small_args, train
 from test_plots import SEED_MEANS, episode_rows, one_error_line, run_cli, summary_of, write_episodes
 
 import eval_gamma_sweep as sweep
@@ -20,6 +20,8 @@ import plot_results as plots
 import ppo_pgg_discrete
 from paper_study import figures
 from pgg_utils import checkpoints, rundir, runs
+from pgg_utils.arguments import answer_cleanrl_habits
+from pgg_utils.checks import env_error
 from pgg_utils.files import MANIFEST, read_csv, read_manifest, sha256_of
 
 FORMAT_2 = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
@@ -264,3 +266,40 @@ def test_a_task_that_raises_in_step_during_training_is_one_line_naming_the_check
 
     with pytest.raises(KeyError):
         runs.launch(replace(args, env_id="CartPole-v1"), "discrete", ppo_pgg_discrete.__file__, broken)
+
+
+@pytest.mark.parametrize(
+    "flags,answer",
+    [
+        (["--upload-model"], "upload nothing to the Hugging Face Hub"),
+        (["--hf-entity", "me"], "upload nothing to the Hugging Face Hub"),
+        (
+            ["--num_iterations=10"],
+            "the number of iterations is derived: ⌈--total-timesteps / (--num-envs × --num-steps)⌉",
+        ),
+    ],
+)
+def test_cleanrls_upload_and_iteration_flags_are_answered_in_one_line(flags, answer, capsys):
+    """CleanRL's continuous script's --upload-model and --hf-entity, and its derived --num-iterations, met tyro's
+    bare "Unrecognized options", where --gamma, --cuda and --batch-size got a one-line answer."""
+    with pytest.raises(SystemExit) as refused:
+        answer_cleanrl_habits(["--env-id", "Hopper-v4", *flags])
+    (line,) = capsys.readouterr().err.splitlines()
+    assert refused.value.code == 2 and line.startswith(f"error: {flags[0].split('=')[0]}: ") and answer in line
+    assert answer_cleanrl_habits(["--no-upload-model"]) == []  # CleanRL's default: its meaning holds, with a note
+    assert "note: --no-upload-model: " in capsys.readouterr().err
+
+
+def test_an_id_a_module_registers_is_answered_with_the_module_prefix_and_dm_controls_numpy_limit():
+    """CleanRL's dm_control test id and MiniGrid's ids met gymnasium's "Namespace dm_control not found" and
+    "Environment `MiniGrid-Empty-5x5` doesn't exist", with no hint of the `shimmy:` / `minigrid:` prefix, nor of
+    dm-control's numpy-2 limit that docs/usage.md states."""
+    dm_control = env_error("dm_control/cartpole-balance-v0", "continuous")
+    assert "--env-id shimmy:dm_control/cartpole-balance-v0 (pip install 'shimmy[dm-control]')" in dm_control
+    assert "dm-control 1.0.14, the release for MuJoCo 2.3.7, fails on numpy 2" in dm_control
+    assert "fails on numpy 2" in env_error("shimmy:dm_control/cartpole-balance-v0", "continuous")
+    assert "--env-id minigrid:MiniGrid-Empty-5x5-v0 (pip install minigrid)" in env_error(
+        "MiniGrid-Empty-5x5-v0", "discrete"
+    )
+    assert "--env-id module:Id" in env_error("mymodule/MyTask-v0", "discrete")
+    assert "fails on numpy 2" in (ROOT / "docs" / "usage.md").read_text()  # where the hint sends the reader
