@@ -3,7 +3,11 @@ seed lost from a whole configuration, a manifest that could delete a user's file
 word on a user's own tasks; the loud cases, each one line naming its real cause; and the field's habits
 (Stable-Baselines3's `predict`, a per-call seed)."""
 
+import os
+import re
 import shutil
+import subprocess
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -303,3 +307,49 @@ def test_an_id_a_module_registers_is_answered_with_the_module_prefix_and_dm_cont
     )
     assert "--env-id module:Id" in env_error("mymodule/MyTask-v0", "discrete")
     assert "fails on numpy 2" in (ROOT / "docs" / "usage.md").read_text()  # where the hint sends the reader
+
+
+# --- the README's agent snippet, and the field's habits --------------------------------------------
+
+
+def test_the_readmes_agent_snippet_runs_from_another_folder_and_a_missing_file_says_so(tmp_path):
+    """The snippet worked only from the clone's root: from another folder its relative path met "unreadable
+    checkpoint (FileNotFoundError …)". It finds the agents beside the module it imports, and seeds act per call
+    (a numpy Generator), so two runs from anywhere print the same return; a missing file reads "no such file"."""
+    section = (ROOT / "README.md").read_text().split("## Use a trained agent", 1)[1]
+    code = re.search(r"```python\n(.*?)```", section, flags=re.DOTALL).group(1)
+    assert "seed=rng" in code and "agent.predict(obs, deterministic=True)` returns `(action, None)`" in section
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}  # as an installed copy is importable from anywhere
+    printed = [subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True, text=True,
+                              timeout=300, check=True).stdout for _ in range(2)]  # fmt: skip
+    assert printed[0] == printed[1] and float(printed[0]) > 1000
+    with pytest.raises(FileNotFoundError) as missing:
+        ppo_pgg_discrete.load_checkpoint("results/discrete/agents/nothing.pt")
+    assert (
+        str(missing.value) == f"no such checkpoint file: results/discrete/agents/nothing.pt (relative to {Path.cwd()})"
+    )
+
+
+@pytest.mark.parametrize("kind", ["discrete", "continuous"])
+def test_predict_is_sb3s_call_and_act_takes_a_seed_of_its_own(kind):
+    """Stable-Baselines3's `model.predict(obs, deterministic=True)` -> (action, state) had no counterpart, and `act`
+    seeded only through torch's global generator or noise=: a per-call seed (an int or a numpy Generator) draws the
+    same actions each time and leaves torch's generator where it was."""
+    agent = SCRIPTS[kind].Agent(4, 3)
+    obs = np.random.default_rng(0).standard_normal((6, 4))
+    action, state = agent.predict(obs, deterministic=True)
+    assert state is None and np.array_equal(action, agent.act(obs, 1.0, deterministic=True))
+    assert np.array_equal(agent.predict(obs, guidance=2.0)[0].shape, agent.act(obs, 2.0).shape)
+    torch_state = torch.get_rng_state()
+    assert np.array_equal(agent.act(obs, 1.5, seed=3), agent.act(obs, 1.5, seed=3))
+    first, second = np.random.default_rng(7), np.random.default_rng(7)
+    assert np.array_equal([agent.act(obs, 1.5, seed=first) for _ in range(3)],
+                          [agent.act(obs, 1.5, seed=second) for _ in range(3)])  # fmt: skip
+    assert torch.equal(torch.get_rng_state(), torch_state)
+    for bad, message in ((-1, "seed must be an integer in [0, 2**64) or a numpy Generator, got -1"),
+                         (1.5, "seed must be an integer in [0, 2**64) or a numpy Generator, got 1.5")):  # fmt: skip
+        with pytest.raises(ValueError) as refused:
+            agent.act(obs, 1.0, seed=bad)
+        assert str(refused.value) == message
+    with pytest.raises(ValueError, match=r"^pass noise or seed, not both: seed draws the noise$"):
+        agent.act(obs[0], 1.0, noise=np.zeros(3), seed=1)
