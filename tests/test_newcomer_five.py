@@ -353,3 +353,18 @@ def test_predict_is_sb3s_call_and_act_takes_a_seed_of_its_own(kind):
         assert str(refused.value) == message
     with pytest.raises(ValueError, match=r"^pass noise or seed, not both: seed draws the noise$"):
         agent.act(obs[0], 1.0, noise=np.zeros(3), seed=1)
+
+
+def test_compare_paper_with_one_seed_says_no_cell_is_tested_not_alpha_nan(tmp_path):
+    """With one seed, compare_paper.md printed "at Holm's first step (α/4 = nan)": no Welch test is possible, and
+    the report says so; with seeds enough the sentence is as before."""
+    means = {("CartPole-v1", "ppo", 100000, 1.0): [270], ("CartPole-v1", "pgg_g1.1", 100000, 2.0): [100]}
+    write_episodes(tmp_path / "one" / "episodes.csv", episode_rows(means))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "one"),), output=str(tmp_path / "o1"), compare_paper=True))
+    report = (tmp_path / "o1" / "compare_paper.md").read_text()
+    assert "nan" not in report and "= nan" not in report
+    assert ("Cell by cell, **no cell is tested**: Welch's t needs two seeds on each side, and ours hold one (the "
+            "relative gap's interval above is then a point).") in report  # fmt: skip
+    write_episodes(tmp_path / "three" / "episodes.csv", episode_rows(SEED_MEANS))
+    plots.generate(plots.Args(sweeps=(str(tmp_path / "three"),), output=str(tmp_path / "o3"), compare_paper=True))
+    assert "Holm-corrected over these 12 cells" in (tmp_path / "o3" / "compare_paper.md").read_text()
