@@ -23,7 +23,7 @@ import eval_gamma_sweep as sweep
 import plot_results as plots
 import ppo_pgg_discrete
 from paper_study import figures
-from pgg_utils import checkpoints, rundir, runs
+from pgg_utils import cells, checkpoints, rundir, runs
 from pgg_utils.arguments import answer_cleanrl_habits
 from pgg_utils.checks import env_error
 from pgg_utils.files import MANIFEST, read_csv, read_manifest, sha256_of
@@ -368,3 +368,35 @@ def test_compare_paper_with_one_seed_says_no_cell_is_tested_not_alpha_nan(tmp_pa
     write_episodes(tmp_path / "three" / "episodes.csv", episode_rows(SEED_MEANS))
     plots.generate(plots.Args(sweeps=(str(tmp_path / "three"),), output=str(tmp_path / "o3"), compare_paper=True))
     assert "Holm-corrected over these 12 cells" in (tmp_path / "o3" / "compare_paper.md").read_text()
+
+
+# --- docs/usage.md, as the code and the logs have it ---------------------------------------------------
+
+
+def test_usage_says_what_a_cells_name_follows_as_the_code_does(tmp_path):
+    """docs/usage.md said a cell's name "covers every file of code that runs in its episodes": a helper inside a
+    task's package, imported by the package's name, is not followed. The page says what the code does, either way."""
+    (tmp_path / "mypkg").mkdir()
+    (tmp_path / "mypkg" / "__init__.py").write_text("")
+    (tmp_path / "mypkg" / "helper.py").write_text("")
+    (tmp_path / "mypkg" / "tasks.py").write_text("from mypkg import helper\n")
+    followed = tmp_path / "mypkg" / "helper.py" in cells.imported_files([tmp_path / "mypkg" / "tasks.py"])
+    usage = " ".join((ROOT / "docs" / "usage.md").read_text().split())
+    assert "covers every file of code that runs in its episodes" not in usage
+    assert followed != ("a helper inside a task's package that the task imports by the package's name" in usage)
+
+
+def test_usage_gives_the_logged_suites_count_and_the_three_skips_of_a_fresh_clone():
+    """docs/usage.md gave "9 min 27 s for 494" (a run with a failure; the suite then collected 495) and one skip,
+    where a fresh clone skips three: rliable is not in [dev], the paper's figures lie in ../shared/paper, and a
+    MuJoCo video needs a headless renderer."""
+    usage = " ".join((ROOT / "docs" / "usage.md").read_text().split())
+    count, minutes, seconds = re.search(r"(\d+) min (\d+) s for the (\d+) of 2026-12-05", usage).group(3, 1, 2)
+    log = (ROOT / "results" / "run_logs_2026-12-05.txt").read_text()
+    passed, skipped = re.search(
+        rf"^(\d+) passed, (\d+) skipped, .*\(0:{int(minutes):02d}:{seconds}\)$", log, re.MULTILINE
+    ).groups()
+    assert int(count) == int(passed) + int(skipped)
+    assert "rliable" not in (ROOT / "pyproject.toml").read_text().split("dev = [", 1)[1].split("]", 1)[0]
+    assert "In a fresh clone three are skipped" in usage
+    assert all(word in usage for word in ("`pip install rliable`", "`../shared/paper`", "`apt-get install libosmesa6`"))
