@@ -489,17 +489,18 @@ def normalisation_references(summary) -> tuple[dict, dict]:
             continue
         ppo = sorted((r for r in summary if r["env_id"] == env and r["variant"] == "ppo"
                       and float(r["eval_guidance"]) == 1.0), key=lambda r: int(r["step"]))  # fmt: skip
-        configurations = {r["series"] for r in ppo}
         if not ppo:
-            missing[env] = "the paper has no row for it and the sweep holds no PPO at eval γ = 1"
-        elif len(configurations) > 1:
-            missing[env] = f"the paper has no row for it and the sweep holds {len(configurations)} PPO configurations"
-        elif int(ppo[0]["step"]) == int(ppo[-1]["step"]) or float(ppo[0]["mean"]) == float(ppo[-1]["mean"]):
-            missing[env] = ("the paper has no row for it and the sweep's PPO (eval γ = 1) returns the same at its "
-                            "first and last step" if len(ppo) > 1 else
-                            "the paper has no row for it and the sweep's PPO (eval γ = 1) was swept at one step")  # fmt: skip
+            why = "the sweep holds no PPO at eval γ = 1"
+        elif len(configurations := {r["series"] for r in ppo}) > 1:
+            why = f"the sweep holds {len(configurations)} PPO configurations"
+        elif int(ppo[0]["step"]) == int(ppo[-1]["step"]):
+            why = "the sweep's PPO (eval γ = 1) was swept at one step"
+        elif float(ppo[0]["mean"]) == float(ppo[-1]["mean"]):
+            why = "the sweep's PPO (eval γ = 1) returns the same at its first and last step"
         else:
             references[env] = (float(ppo[0]["mean"]), float(ppo[-1]["mean"]), OWN_REFERENCE)
+            continue
+        missing[env] = f"the paper has no row for it and {why}"
     return references, missing
 
 
@@ -552,8 +553,8 @@ def aggregate_iqm(summary) -> list[dict]:
 def performance_profiles(summary, points: int = 201) -> tuple[dict, int, int]:
     """({(variant, eval γ): (τ, profile, low, high)}, step, envs): rliable's performance profile
     (paper_study.stats.performance_profile) of each variant and eval γ at the last step, from the
-    aggregate IQM's normalised scores, on one grid of τ from the lowest score to the highest (rliable's own
-    plots span the scores, not the references: one task far past its reference would squeeze the rest)."""
+    aggregate IQM's normalised scores, on one grid of τ from the lowest score to the highest, as rliable's own
+    plots span the scores (the references, 0 and 1, need not lie inside)."""
     scores = normalised_scores(summary)
     step = max(s for _, s, _ in scores)
     at_step = {(variant, gamma): per_env for (variant, s, gamma), per_env in scores.items() if s == step}

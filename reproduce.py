@@ -555,12 +555,12 @@ def drop_stale_agents(folder: Path, listed: dict[str, str | None], in_readme: se
 
 def exported_agent(path: Path) -> bool:
     """Whether `path` (<folder>/<run>/checkpoints/step_*.pt) is an agent export_agents wrote: a checkpoint without
-    resume state, of the run whose folder holds it."""
+    resume state, of the run whose folder holds it (or of a version that did not record runs)."""
     try:
         agent = checkpoints.read_checkpoint_file(path)
     except (ValueError, OSError):
         return False
-    return "resume" not in agent and agent.get("run") == path.parent.parent.name
+    return "resume" not in agent and agent.get("run", path.parent.parent.name) == path.parent.parent.name
 
 
 def readme_rows(readme: Path) -> dict[str, str]:

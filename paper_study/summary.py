@@ -151,7 +151,7 @@ def short_configurations_note(summary: list[dict]) -> str | None:
     """The line that names the configurations short of seeds in every cell, against the other configurations of
     their task evaluated the same way (a seed lost from all of a configuration's cells), or None."""
     short = sorted({(r["env_id"], series_id(r["variant"], r["series"]), r["config_seeds"], r["of_seeds"])
-                    for r in summary if r.get("config_seeds", r["n_seeds"]) < r.get("of_seeds", r["n_seeds"])})  # fmt: skip
+                    for r in summary if r["config_seeds"] < r["of_seeds"]})  # fmt: skip
     if not short:
         return None
     named = "; ".join(f"{env} {series} ({held} of {most} seeds)" for env, series, held, most in short)
@@ -161,7 +161,7 @@ def short_configurations_note(summary: list[dict]) -> str | None:
 
 def short_cells_note(summary: list[dict], shown: int = 5) -> str | None:
     """The line that names the cells with fewer seeds than their siblings, or None where there are none."""
-    short = [r for r in summary if r["n_seeds"] < r.get("config_seeds", r["n_seeds"])]
+    short = [r for r in summary if r["n_seeds"] < r["config_seeds"]]
     if not short:
         return None
     named = "; ".join(f"{r['env_id']} {series_id(r['variant'], r['series'])} at step {r['step']}, "

@@ -22,6 +22,7 @@ from test_plots import SEED_MEANS, episode_rows, one_error_line, run_cli, summar
 import eval_gamma_sweep as sweep
 import plot_results as plots
 import ppo_pgg_discrete
+import reproduce
 from paper_study import figures
 from pgg_utils import cells, checkpoints, rundir, runs
 from pgg_utils.arguments import answer_cleanrl_habits
@@ -400,3 +401,18 @@ def test_usage_gives_the_logged_suites_count_and_the_three_skips_of_a_fresh_clon
     assert "rliable" not in (ROOT / "pyproject.toml").read_text().split("dev = [", 1)[1].split("]", 1)[0]
     assert "In a fresh clone three are skipped" in usage
     assert all(word in usage for word in ("`pip install rliable`", "`../shared/paper`", "`apt-get install libosmesa6`"))
+
+
+def test_an_agents_export_removes_only_the_agents_an_earlier_export_wrote(tmp_path):
+    """reproduce.py's agents folder shares the rule: an export before manifests, which only its README lists,
+    loses its stale agents, while a training checkpoint or any other file of the user's under a listed run stays."""
+    folder = tmp_path / "agents"
+    stale = folder / "cartpole" / "checkpoints"
+    checkpoints.export_agent(FORMAT_2, stale / FORMAT_2.name)
+    shutil.copy(FORMAT_2, stale / "step_000001024.pt")  # the user's training checkpoint, resume state and all
+    (stale / "step_000002048.pt").write_bytes(b"the user's")
+    (folder / "README.md").write_text(f"# Trained agents\n\n{reproduce.README_HEADER}\n|---|---|---|---|---|---|\n"
+                                      "| cartpole | CartPole-v1 | pgg_g1.1 | 1 | 512 | `python ppo_pgg_discrete.py` |\n")  # fmt: skip
+    reproduce.export_agents([], folder)
+    assert sorted(p.name for p in stale.iterdir()) == ["step_000001024.pt", "step_000002048.pt"]
+    assert read_manifest(folder) == {}
