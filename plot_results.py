@@ -614,8 +614,8 @@ def generate_locked(args: Args) -> list[Path]:
     for path in removed:
         print(f"note: removed {path}: the previous run into {output} wrote it, this one did not", file=sys.stderr)
     for path in kept:
-        print(f"note: kept {path}: {output / MANIFEST} lists it, but not as the file a previous run wrote (edited since, "
-              "or named by hand)", file=sys.stderr)  # fmt: skip
+        print(f"note: kept {path}: {output / MANIFEST} lists it, but not as the file a previous run wrote "
+              "(edited since, or named by hand)", file=sys.stderr)  # fmt: skip
     write_manifest(output, names, "plot_results.py")
     return [*written, output / MANIFEST]
 
@@ -686,8 +686,8 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
         for kind in sorted({r["kind"] for r in summary if r["env_id"] in references}):
             of_kind = [r for r in summary if r["kind"] == kind]
             said = reference_text(references, {r["env_id"] for r in of_kind if r["env_id"] in references})
-            save_figure(figures.aggregate_intervals(aggregate_iqm(of_kind), kind, said), output / f"aggregate_iqm_{kind}",
-                        written)  # fmt: skip
+            intervals = figures.aggregate_intervals(aggregate_iqm(of_kind), kind, said)
+            save_figure(intervals, output / f"aggregate_iqm_{kind}", written)
             profile = figures.performance_profiles(*performance_profiles(of_kind), kind=kind, reference=said)
             save_figure(profile, output / f"performance_profile_{kind}", written)
     if args.runs:

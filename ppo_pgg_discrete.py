@@ -200,7 +200,8 @@ class Agent(nn.Module):
         acts: Gumbel-max samples with standard Gumbel `noise` shaped like the logits (if None: drawn from torch's
         generator, or from one seeded by `seed`, an int or a numpy Generator), or the mode if `deterministic`;
         `logits_null` where the caller holds it (the sweep: once, or zeros for its uniform-null control). ValueError,
-        one line, for an input training would refuse, or a noise not finite or not of that shape (policy.guided_actions)."""
+        one line, for an input training would refuse, or a noise not finite or not of that shape
+        (policy.guided_actions)."""
         obs, draw = np.asarray(obs, dtype=np.float32), lambda pi: gumbel_noise(*pi.logits.shape)
         return guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw, seed)  # PGG
 

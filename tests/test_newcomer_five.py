@@ -197,8 +197,8 @@ def test_two_sweeps_of_the_same_checkpoints_with_other_eval_seeds_are_other_epis
 
 
 def test_a_folder_of_symlinks_to_run_directories_sweeps_as_the_runs_do(tmp_path):
-    """The sweep said "no checkpoints (checkpoints/step_*.pt) under links/", though each symlink alone worked: Path.rglob
-    follows no link to a folder. A link cycle ends the search instead of looping."""
+    """The sweep said "no checkpoints (checkpoints/step_*.pt) under links/", though each symlink alone worked:
+    Path.rglob follows no link to a folder. A link cycle ends the search instead of looping."""
     links = tmp_path / "links"
     links.mkdir()
     (links / "cartpole").symlink_to(FORMAT_2.parent.parent, target_is_directory=True)
