@@ -34,12 +34,15 @@ Writes into --output (and prints each path):
   learning_curves.png/pdf       (--runs) episodic training return against steps, mean and CI over seeds
   best_gamma.md / .csv          the best eval γ per env, variant and step
   aggregate_iqm.md / .csv       interquartile mean over envs and seeds of scores normalised by fixed
-                                references (0 = the paper's PPO at its first step, 1 = at its last),
-                                with stratified-bootstrap 95% CIs (scipy.stats.bootstrap);
+                                references (0 = the paper's PPO at its first step, 1 = at its last;
+                                on a task the paper did not run, the sweep's own PPO at eval γ = 1, and
+                                the table and figures say which; a task with neither is left out, with
+                                a printed note), with stratified-bootstrap 95% CIs (scipy.stats.bootstrap);
                                 aggregate_iqm_<kind>.png/pdf draws the last step's as intervals
   performance_profile_<kind>.png/pdf  rliable's performance profile of the same normalised scores at
                                 the last step: per variant and eval γ the fraction of (task, seed)
-                                scores above each τ, with a stratified-bootstrap 95% CI
+                                scores above each τ, with a stratified-bootstrap 95% CI, over the
+                                scores' range
   compare_paper.md / .csv       (--compare-paper) the agreement report: per paper cell Welch's t test
                                 on the two summaries, Holm-corrected over the cells of one table,
                                 effect sizes, CI overlap and the gap its test detects 80% of the time;
@@ -53,10 +56,11 @@ Writes into --output (and prints each path):
                                 behind it, and which cells come from it
   controls.md                   when the sweeps hold several evaluation modes (--deterministic,
                                 --uniform-null): the modes side by side, cell by cell
-  outputs.txt                   the files above that this run wrote. A rerun into the same folder
-                                removes those the previous run listed and it did not write again (a
-                                previous grid's figures; learning curves a rerun without --runs does
-                                not draw), and no other file
+  outputs.txt                   the files above that this run wrote, each with its sha256. A rerun into
+                                the same folder removes those the previous run listed and it did not
+                                write again (a previous grid's figures; learning curves a rerun without
+                                --runs does not draw), where they are still the bytes it recorded; a
+                                file edited since, or a name added by hand, is kept, with a note
 
 --output is locked while it is written (a second plot_results.py or reproduce.py into it is refused).
 Partial inputs are never tabled as whole: an episodes.csv that differs from its sweep's written.csv
@@ -107,6 +111,7 @@ from paper_study.summary import (
     read_provenance,
     seeds_short,
     short_cells_note,
+    short_configurations_note,
     summarise,
     table_csv,
 )
@@ -158,11 +163,12 @@ USAGE = ("usage: plot_results.py SWEEP [SWEEP ...] [--output DIR] [--runs RUN ..
 
 
 def run_args_files(run_paths) -> list[Path]:
-    """The args.json of each run: a folder holding one is a run, any other folder every run below it."""
+    """The args.json of each run: a folder holding one is a run, any other folder every run below it (links to
+    run directories followed)."""
     found = []
     for raw in run_paths:
         path = Path(raw)
-        found.extend([path / "args.json"] if (path / "args.json").is_file() else sorted(path.rglob("args.json")))
+        found.extend([path / "args.json"] if (path / "args.json").is_file() else files.files_under(path, "args.json"))
     return found
 
 
@@ -467,17 +473,59 @@ def iqm_along(*samples, axis=-1):
     return np.take(x, np.arange(cut, n - cut), axis=axis).mean(axis=axis)
 
 
+PAPER_REFERENCE, OWN_REFERENCE = "the paper's PPO", "this sweep's PPO at γ = 1"
+
+
+def normalisation_references(summary) -> tuple[dict, dict]:
+    """({env: (first, last, whose)}, {env: why it has none}): the two fixed references of an env's normalised
+    scores, 0 and 1, PPO's mean return (eval γ = 1) at its first and at its last step: the paper's
+    (agreement.paper_ppo_span) where the paper has a row, else this sweep's own PPO (its one PPO configuration,
+    swept at two steps or more, whose returns differ between them)."""
+    span = paper_ppo_span()
+    references, missing = {}, {}
+    for env in sorted({r["env_id"] for r in summary}):
+        if env in span:
+            references[env] = (*span[env], PAPER_REFERENCE)
+            continue
+        ppo = sorted((r for r in summary if r["env_id"] == env and r["variant"] == "ppo"
+                      and float(r["eval_guidance"]) == 1.0), key=lambda r: int(r["step"]))  # fmt: skip
+        if not ppo:
+            why = "the sweep holds no PPO at eval γ = 1"
+        elif len(configurations := {r["series"] for r in ppo}) > 1:
+            why = f"the sweep holds {len(configurations)} PPO configurations"
+        elif int(ppo[0]["step"]) == int(ppo[-1]["step"]):
+            why = "the sweep's PPO (eval γ = 1) was swept at one step"
+        elif float(ppo[0]["mean"]) == float(ppo[-1]["mean"]):
+            why = "the sweep's PPO (eval γ = 1) returns the same at its first and last step"
+        else:
+            references[env] = (float(ppo[0]["mean"]), float(ppo[-1]["mean"]), OWN_REFERENCE)
+            continue
+        missing[env] = f"the paper has no row for it and {why}"
+    return references, missing
+
+
+def reference_text(references: dict, envs) -> str:
+    """What 0 and 1 of the normalised scores of `envs` are, in words: the paper's PPO or this sweep's, per task."""
+    whose = defaultdict(list)
+    for env in sorted(envs):
+        whose[references[env][2]].append(env)
+    if len(whose) == 1:
+        return f"0 = {next(iter(whose))} at its first step, 1 = at its last"
+    return ("0 = PPO at its first step, 1 = at its last: "
+            + "; ".join(f"{reference} for {', '.join(tasks)}" for reference, tasks in sorted(whose.items())))  # fmt: skip
+
+
 def normalised_scores(summary) -> dict:
     """{(variant, step, eval γ): [per env, its per-seed mean returns normalised]}: per env by fixed
-    references, the paper's PPO at the first and the last step of its table (0 and 1;
-    agreement.paper_ppo_span), so that adding a γ or a variant moves no score; a task the paper did not
-    run is left out. The scores of the aggregate IQM and of the performance profile."""
-    span = paper_ppo_span()
+    references, PPO at the first and the last step (0 and 1; normalisation_references: the paper's where
+    it has a row, else this sweep's own), so that adding a γ or a variant moves no score; a task with
+    neither is left out. The scores of the aggregate IQM and of the performance profile."""
+    references = normalisation_references(summary)[0]
     groups = defaultdict(list)
     for r in summary:
-        if r["env_id"] not in span:
+        if r["env_id"] not in references:
             continue
-        lo, hi = span[r["env_id"]]
+        lo, hi, _ = references[r["env_id"]]
         seed_means = np.array([float(x) for x in r["seed_means"].split(";")])
         groups[(series_id(r["variant"], r["series"]), int(r["step"]), float(r["eval_guidance"]))].append(
             (seed_means - lo) / ((hi - lo) or 1.0)
@@ -505,12 +553,14 @@ def aggregate_iqm(summary) -> list[dict]:
 def performance_profiles(summary, points: int = 201) -> tuple[dict, int, int]:
     """({(variant, eval γ): (τ, profile, low, high)}, step, envs): rliable's performance profile
     (paper_study.stats.performance_profile) of each variant and eval γ at the last step, from the
-    aggregate IQM's normalised scores, on one grid of τ over the scores' range."""
+    aggregate IQM's normalised scores, on one grid of τ from the lowest score to the highest, as rliable's own
+    plots span the scores (the references, 0 and 1, need not lie inside)."""
     scores = normalised_scores(summary)
     step = max(s for _, s, _ in scores)
     at_step = {(variant, gamma): per_env for (variant, s, gamma), per_env in scores.items() if s == step}
     every = np.concatenate([np.concatenate(per_env) for per_env in at_step.values()])
-    taus = np.linspace(min(every.min(), 0.0) - 0.05, max(every.max(), 1.0) + 0.05, points)
+    low, high = (every.min(), every.max()) if every.max() > every.min() else (every.min() - 0.5, every.max() + 0.5)
+    taus = np.linspace(low, high, points)
     envs = max(len(per_env) for per_env in at_step.values())
     return {key: (taus, *performance_profile(per_env, taus)) for key, per_env in at_step.items()}, step, envs
 
@@ -556,12 +606,17 @@ def generate_locked(args: Args) -> list[Path]:
         write_outputs(args, output, written)
     except BaseException:
         if written:
-            write_manifest(output, previous | manifest_names(output, written), "plot_results.py")
+            write_manifest(output, manifest_names(output, written), "plot_results.py", kept=previous)
         raise
     # Learning curves too: curves of another run's --runs would stand beside tables they are not of.
-    for path in remove_stale(output, previous - manifest_names(output, written)):
+    names = manifest_names(output, written)
+    removed, kept = remove_stale(output, {name: digest for name, digest in previous.items() if name not in names})
+    for path in removed:
         print(f"note: removed {path}: the previous run into {output} wrote it, this one did not", file=sys.stderr)
-    write_manifest(output, manifest_names(output, written), "plot_results.py")
+    for path in kept:
+        print(f"note: kept {path}: {output / MANIFEST} lists it, but not as the file a previous run wrote "
+              "(edited since, or named by hand)", file=sys.stderr)  # fmt: skip
+    write_manifest(output, names, "plot_results.py")
     return [*written, output / MANIFEST]
 
 
@@ -570,8 +625,13 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     provenance = read_provenance(args.provenance)
     episodes = read_episodes(args.sweeps)
     summary = summarise(select_mode(episodes, args.policy, args.null_branch), provenance)
-    if note := short_cells_note(summary):
-        print(note, file=sys.stderr)
+    steps = sorted({int(r["step"]) for r in summary})
+    if args.response_step is not None and args.response_step not in steps:
+        raise InputError(f"--response-step {args.response_step}: the sweeps hold no checkpoint at that step "
+                         f"(their steps: {', '.join(map(str, steps))})")  # fmt: skip
+    for note in (short_cells_note(summary), short_configurations_note(summary)):
+        if note:
+            print(note, file=sys.stderr)
     if len({(r["policy"], r["null_branch"]) for r in episodes}) > 1:
         write(output / "controls.md", controls_table(summarise(episodes, provenance)), written)
     if args.provenance:
@@ -612,15 +672,23 @@ def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     best = best_gamma(summary)
     write_csv(output / "best_gamma.csv", best, written)
     write(output / "best_gamma.md", simple_markdown(best), written)
+    references, missing = normalisation_references(summary)
+    if missing:
+        left_out = "; ".join(f"{env}: {why}" for env, why in missing.items())
+        print(f"note: the aggregate IQM and performance profile leave out the tasks with no reference to normalise "
+              f"by ({left_out})", file=sys.stderr)  # fmt: skip
     aggregate = aggregate_iqm(summary)
     if aggregate:
+        said = reference_text(references, references)
         write_csv(output / "aggregate_iqm.csv", aggregate, written)
-        write(output / "aggregate_iqm.md", simple_markdown(aggregate), written)
-        for kind in sorted({r["kind"] for r in summary if r["env_id"] in paper_ppo_span()}):
+        write(output / "aggregate_iqm.md", simple_markdown(aggregate) + f"\nScores normalised per task: {said}.\n",
+              written)  # fmt: skip
+        for kind in sorted({r["kind"] for r in summary if r["env_id"] in references}):
             of_kind = [r for r in summary if r["kind"] == kind]
-            save_figure(figures.aggregate_intervals(aggregate_iqm(of_kind), kind), output / f"aggregate_iqm_{kind}",
-                        written)  # fmt: skip
-            profile = figures.performance_profiles(*performance_profiles(of_kind), kind=kind)
+            said = reference_text(references, {r["env_id"] for r in of_kind if r["env_id"] in references})
+            intervals = figures.aggregate_intervals(aggregate_iqm(of_kind), kind, said)
+            save_figure(intervals, output / f"aggregate_iqm_{kind}", written)
+            profile = figures.performance_profiles(*performance_profiles(of_kind), kind=kind, reference=said)
             save_figure(profile, output / f"performance_profile_{kind}", written)
     if args.runs:
         curves, left_out = training_curves(args.runs)

@@ -246,14 +246,20 @@ class Agent(nn.Module):
         return numpy_policy(guided_policy, cond, null, guidance)  # PGG
 
     @torch.no_grad()
-    def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None) -> np.ndarray:  # PGG
+    def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None, seed=None) -> np.ndarray:  # PGG  # fmt: skip
         """Actions of pi_hat at `guidance` (a number, or one per row) for raw observations (one, or a batch), as the
-        sweep acts: sampled with standard normal `noise` shaped like the actions (torch's generator's if None), or the
-        mode if `deterministic`, clipped to the task's bounds; `mean_null` where the caller holds it. ValueError, one
-        line, for an input training would refuse (pgg_utils.policy.guided_actions)."""
+        sweep acts: sampled with standard normal `noise` shaped like the actions (if None: drawn from torch's generator,
+        or from one seeded by `seed`, an int or a numpy Generator), or the mode if `deterministic`, clipped to the
+        task's bounds; `mean_null` where the caller holds it. ValueError, one line, for an input training would refuse,
+        or a noise not finite or not of that shape (pgg_utils.policy.guided_actions)."""
         raw = np.asarray(raw_obs, dtype=np.float64)
         draw = lambda pi: torch.randn(pi.mode().shape).numpy()  # standard normal, from torch's generator
-        return guided_actions(self, raw, guidance, deterministic, noise, mean_null, draw)  # PGG
+        return guided_actions(self, raw, guidance, deterministic, noise, mean_null, draw, seed)  # PGG
+
+    def predict(self, raw_obs, state=None, episode_start=None, deterministic: bool = False, guidance=1.0):  # PGG
+        """Stable-Baselines3's `model.predict`: (`act`'s actions, None), the None its recurrent state (this actor
+        holds none; `state` and `episode_start` are taken and left unused, as SB3's feed-forward policies do)."""
+        return self.act(raw_obs, guidance, deterministic), None  # PGG
 
 
 # The methods of Agent that the rest of the project calls, and who calls each (checked when training starts).

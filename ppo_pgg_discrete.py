@@ -200,13 +200,20 @@ class Agent(nn.Module):
         return numpy_policy(guided_policy, Categorical(logits_cond), Categorical(logits_null), guidance)  # PGG
 
     @torch.no_grad()
-    def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None) -> np.ndarray:  # PGG
+    def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None, seed=None) -> np.ndarray:  # PGG  # fmt: skip
         """Actions of pi_hat at `guidance` (a number, or one per row) for observations (one, or a batch), as the sweep
-        acts: Gumbel-max samples with standard Gumbel `noise` shaped like the logits (torch's generator's if None), or
-        the mode if `deterministic`; `logits_null` where the caller holds it (the sweep: once, or zeros for its
-        uniform-null control). ValueError, one line, for an input training would refuse (policy.guided_actions)."""
+        acts: Gumbel-max samples with standard Gumbel `noise` shaped like the logits (if None: drawn from torch's
+        generator, or from one seeded by `seed`, an int or a numpy Generator), or the mode if `deterministic`;
+        `logits_null` where the caller holds it (the sweep: once, or zeros for its uniform-null control). ValueError,
+        one line, for an input training would refuse, or a noise not finite or not of that shape
+        (policy.guided_actions)."""
         obs, draw = np.asarray(obs, dtype=np.float32), lambda pi: gumbel_noise(*pi.logits.shape)
-        return guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw)  # PGG
+        return guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw, seed)  # PGG
+
+    def predict(self, obs, state=None, episode_start=None, deterministic: bool = False, guidance=1.0):  # PGG
+        """Stable-Baselines3's `model.predict`: (`act`'s actions, None), the None its recurrent state (this actor
+        holds none; `state` and `episode_start` are taken and left unused, as SB3's feed-forward policies do)."""
+        return self.act(obs, guidance, deterministic), None  # PGG
 
 
 # The methods of Agent that the rest of the project calls, and who calls each (checked when training starts).

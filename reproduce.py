@@ -504,8 +504,9 @@ def export_agents(specs: list[RunSpec], folder: Path) -> Path:
     the agents of the tables beside it: those an earlier export wrote (listed in its outputs.txt, or runs
     its README lists) that this one does not are removed (drop_stale_agents). Returns the README's path."""
     readme = folder / "README.md"
-    earlier = read_manifest(folder) | {str(path.relative_to(folder)) for name in readme_rows(readme)
-                                       for path in checkpoints.checkpoints_of(folder / name)}  # fmt: skip
+    earlier = read_manifest(folder)
+    listed_in_readme = {str(path.relative_to(folder)) for name in readme_rows(readme)
+                        for path in checkpoints.checkpoints_of(folder / name)} - earlier.keys()  # fmt: skip
     rows, exported = {}, set()
     for spec in specs:
         saved = checkpoints.checkpoints_of(spec.run_dir)
@@ -529,19 +530,37 @@ def export_agents(specs: list[RunSpec], folder: Path) -> Path:
         *rows.values(),
         "",
     ]))  # fmt: skip
-    drop_stale_agents(folder, earlier - exported)
+    stale = {name: digest for name, digest in earlier.items() if name not in exported}
+    drop_stale_agents(folder, stale, listed_in_readme - exported)
     write_manifest(folder, exported, "reproduce.py")
     return readme
 
 
-def drop_stale_agents(folder: Path, names: set[str]) -> None:
-    """Removes the listed agents (files.remove_stale: only files inside `folder`), and each run folder
-    they leave empty, with a note per run."""
-    for run in sorted({Path(path).relative_to(folder).parts[0] for path in remove_stale(folder, names)}):
+def drop_stale_agents(folder: Path, listed: dict[str, str | None], in_readme: set[str]) -> None:
+    """Removes the agents an earlier export wrote: those its manifest lists, where they are still what it wrote
+    (files.remove_stale: only files inside `folder`), and those of an export before manifests, which only its
+    README lists, where each is the agent of the run it is filed under (exported_agent); then each run folder
+    they leave empty, with a note per run. Any other file is kept."""
+    removed, _ = remove_stale(folder, listed)
+    for name in sorted(in_readme):
+        if exported_agent(folder / name):
+            (folder / name).unlink()
+            removed.append(folder / name)
+    for run in sorted({Path(path).relative_to(folder).parts[0] for path in removed}):
         for empty in (folder / run / "checkpoints", folder / run):
             with contextlib.suppress(OSError):  # a file of the user's keeps its folder
                 empty.rmdir()
         print(f"note: removed the agents of {run} from {folder}: this grid's tables do not hold it", file=sys.stderr)
+
+
+def exported_agent(path: Path) -> bool:
+    """Whether `path` (<folder>/<run>/checkpoints/step_*.pt) is an agent export_agents wrote: a checkpoint without
+    resume state, of the run whose folder holds it (or of a version that did not record runs)."""
+    try:
+        agent = checkpoints.read_checkpoint_file(path)
+    except (ValueError, OSError):
+        return False
+    return "resume" not in agent and agent.get("run", path.parent.parent.name) == path.parent.parent.name
 
 
 def readme_rows(readme: Path) -> dict[str, str]:

@@ -330,11 +330,18 @@ def comparison_markdown(rows: list[dict], summary: list[dict], tasks: list[dict]
                      f"{gap_verdict(of_kind)}")  # fmt: skip
         lines.append("")
         ours_n = "–".join(str(n) for n in sorted({min(r["our_n"] for r in family), max(r["our_n"] for r in family)}))
-        lines.append(f"Cell by cell, **{n_sig} of {len(family)} differ significantly** (Welch's t, Holm-corrected over "
-                     f"these {len(family)} cells, family-wise α = {ALPHA}). What that count can see: at Holm's "
-                     f"first step (α/{len(family)} = {alpha:.2g}), with {PAPER_SEEDS} seeds on the paper's side and "
-                     f"{ours_n} on ours, a cell's test detects a gap {100 * POWER:.0f}% of the time only at the size "
-                     "below (per cell from its two seed sds; the median over a task's cells).")  # fmt: skip
+        tested = sum(1 for r in family if not math.isnan(r["p"]))
+        if tested:
+            lines.append(f"Cell by cell, **{n_sig} of {len(family)} differ significantly** (Welch's t, Holm-corrected "
+                         f"over these {tested} cells, family-wise α = {ALPHA}). What that count can see: at Holm's "
+                         f"first step (α/{tested} = {alpha:.2g}), with {PAPER_SEEDS} seeds on the paper's side and "
+                         f"{ours_n} on ours, a cell's test detects a gap {100 * POWER:.0f}% of the time only at the "
+                         "size below (per cell from its two seed sds; the median over a task's cells).")  # fmt: skip
+        elif max(r["our_n"] for r in family) < 2:
+            lines.append("Cell by cell, **no cell is tested**: Welch's t needs two seeds on each side, and ours hold "
+                         "one (the relative gap's interval above is then a point).")  # fmt: skip
+        else:
+            lines.append("Cell by cell, **no cell is tested**: no cell has a spread on either side to test.")
         lines += ["", *headline_table(of_kind), ""]
         lines.append(f"The gap detected {100 * POWER:.0f}% of the time: the exact power of Welch's test for normal "
                      "samples, the cell's two sds taken as the true ones (`paper_study.stats.detectable_gap`). Cells "

@@ -391,6 +391,11 @@ def gamma_response(summary, envs, step):
     for ax, env in zip(axes, envs):
         env_rows = [r for r in summary if r["env_id"] == env]
         at = step if step is not None else max(int(r["step"]) for r in env_rows)
+        if not any(int(r["step"]) == at for r in env_rows):  # a step another task of the sweep was swept at
+            ax.text(0.5, 0.5, f"not swept at {step_label(at)} steps", ha="center", va="center", transform=ax.transAxes,
+                    fontsize=9, color="0.45")  # fmt: skip
+            style_axis(ax, env, "eval guidance γ (log scale)", "return", steps_on_x=False)
+            continue
         few = few_seeds(env_rows)
         drawn = []
         for variant, series in ordered_series(env_rows):
@@ -476,11 +481,14 @@ def learning_curves(curves: dict, left_out=(), bins: int = 50, min_points: int =
     return fig
 
 
-def aggregate_intervals(aggregate: list[dict], kind: str):
+PAPER_REFERENCE_TEXT = "0 = the paper's PPO at its first step, 1 = at its last"
+
+
+def aggregate_intervals(aggregate: list[dict], kind: str, reference: str = PAPER_REFERENCE_TEXT):
     """The aggregate IQM as rliable draws it: at the last step, one row per (variant, eval γ), the IQM
     of normalised scores with its 95% CI as a bar, in the variant's colour; dotted lines at the two
-    fixed references (plot_results.aggregate_iqm: 0 = the paper's PPO at its first step, 1 = at its
-    last). `aggregate`: aggregate_iqm's rows."""
+    fixed references, which `reference` names (plot_results.reference_text: the paper's PPO at its first
+    step and at its last, or the sweep's own). `aggregate`: aggregate_iqm's rows."""
     last = max(int(r["step"]) for r in aggregate)
     rows = sorted((r for r in aggregate if int(r["step"]) == last),
                   key=lambda r: (variant_rank(r["variant"]), r["variant"], -float(r["eval_guidance"])))  # fmt: skip
@@ -497,17 +505,17 @@ def aggregate_intervals(aggregate: list[dict], kind: str):
         ax.axvline(x, color="0.5", linestyle=":", linewidth=1)
     envs = int(rows[0]["n_envs"]) if rows else 0
     style_axis(ax, f"{kind.capitalize()}: IQM over {envs} tasks × seeds at {step_label(last)} steps (95% CI)",
-               "normalised score: 0 = the paper's PPO at its first step, 1 = at its last", "", steps_on_x=False)  # fmt: skip
+               f"normalised score: {reference}", "", steps_on_x=False)  # fmt: skip
     ax.grid(axis="y", visible=False)
     return fig
 
 
-def performance_profiles(profiles: dict, step: int, envs: int, kind: str):
+def performance_profiles(profiles: dict, step: int, envs: int, kind: str, reference: str = PAPER_REFERENCE_TEXT):
     """rliable's performance profile beside the aggregate IQM, from the same normalised scores: one
     panel per variant, one line per eval γ (its colour in every figure) of the fraction of (task, seed)
-    scores above each τ, its stratified-bootstrap 95% CI as a band; dotted lines at the two fixed
-    references. `profiles`: {(variant [series], eval γ): (taus, profile, low, high)}
-    (plot_results.performance_profiles)."""
+    scores above each τ, its stratified-bootstrap 95% CI as a band, over the τ the scores span; dotted
+    lines at the two fixed references, which `reference` names, where they lie in that span.
+    `profiles`: {(variant [series], eval γ): (taus, profile, low, high)} (plot_results.performance_profiles)."""
     variants = sorted({v for v, _ in profiles}, key=lambda v: (variant_rank(v.split(" [")[0]), v))
     fig, axes = panels(len(variants))
     entries = []
@@ -520,11 +528,12 @@ def performance_profiles(profiles: dict, step: int, envs: int, kind: str):
             entries.append((gamma, f"γ = {gamma:g}", line))
         for x in (0.0, 1.0):
             ax.axvline(x, color="0.5", linestyle=":", linewidth=1)
+        ax.set_xlim(taus[0], taus[-1])
         ax.set_ylim(-0.02, 1.02)
         style_axis(ax, series_label(variant), "normalised score τ", "fraction of runs with score > τ", steps_on_x=False)
     legend_right(fig, entries, "eval γ")
     fig.suptitle(f"{kind.capitalize()}: performance profile over {envs} tasks × seeds at {step_label(step)} steps "
-                 "(95% CI; 0 = the paper's PPO at its first step, 1 = at its last)", fontsize=TITLE_SIZE)  # fmt: skip
+                 f"(95% CI; {reference})", fontsize=TITLE_SIZE)  # fmt: skip
     return fig
 
 

@@ -114,11 +114,15 @@ def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
         })  # fmt: skip
     # A cell's siblings are the other cells of its configuration and evaluation mode: a run missing from
     # one (a cut file, a run stopped before its last checkpoint) leaves it with fewer seeds, which it says.
-    most = defaultdict(int)
+    # A seed missing from every cell of a configuration leaves no sibling with more: the configuration then
+    # says so against the other configurations of its task evaluated the same way.
+    most, most_of_task = defaultdict(int), defaultdict(int)
     for r in out:
         most[sibling_key(r)] = max(most[sibling_key(r)], r["n_seeds"])
+        most_of_task[task_key(r)] = max(most_of_task[task_key(r)], r["n_seeds"])
     for r in out:
-        r["of_seeds"] = most[sibling_key(r)]
+        r["config_seeds"] = most[sibling_key(r)]
+        r["of_seeds"] = most_of_task[task_key(r)]
     return out
 
 
@@ -132,19 +136,36 @@ def sibling_key(row: dict) -> tuple:
             row["null_branch"])  # fmt: skip
 
 
+def task_key(row: dict) -> tuple:
+    return (row["env_id"], row["policy"], row["null_branch"])
+
+
 def seeds_short(row: dict) -> str:
-    """`4 of 5 seeds` where a summary cell holds fewer seeds than its siblings (summarise), else ""."""
+    """`4 of 5 seeds` where a summary cell holds fewer seeds than its siblings, or than the cells of another
+    configuration of its task (summarise), else ""."""
     most = row.get("of_seeds", row["n_seeds"])
     return f"{row['n_seeds']} of {most} seeds" if row["n_seeds"] < most else ""
 
 
+def short_configurations_note(summary: list[dict]) -> str | None:
+    """The line that names the configurations short of seeds in every cell, against the other configurations of
+    their task evaluated the same way (a seed lost from all of a configuration's cells), or None."""
+    short = sorted({(r["env_id"], series_id(r["variant"], r["series"]), r["config_seeds"], r["of_seeds"])
+                    for r in summary if r["config_seeds"] < r["of_seeds"]})  # fmt: skip
+    if not short:
+        return None
+    named = "; ".join(f"{env} {series} ({held} of {most} seeds)" for env, series, held, most in short)
+    return (f"note: {len(short)} configuration(s) hold fewer seeds in every cell than the other configurations of "
+            f"their task, and say so in the tables: {named}")  # fmt: skip
+
+
 def short_cells_note(summary: list[dict], shown: int = 5) -> str | None:
     """The line that names the cells with fewer seeds than their siblings, or None where there are none."""
-    short = [r for r in summary if seeds_short(r)]
+    short = [r for r in summary if r["n_seeds"] < r["config_seeds"]]
     if not short:
         return None
     named = "; ".join(f"{r['env_id']} {series_id(r['variant'], r['series'])} at step {r['step']}, "
-                      f"eval γ {r['eval_guidance']:g} ({seeds_short(r)})" for r in short[:shown])  # fmt: skip
+                      f"eval γ {r['eval_guidance']:g} ({r['n_seeds']} of {r['config_seeds']} seeds)" for r in short[:shown])  # fmt: skip
     more = f"; and {len(short) - shown} more" if len(short) > shown else ""
     return (f"note: {len(short)} cell(s) hold fewer seeds than the other cells of their configuration, and say so "
             f"in the tables: {named}{more}")  # fmt: skip

@@ -65,6 +65,10 @@ CPU_ONLY = (
     "(benchmarks/README.md)"
 )
 SAVED = "checkpoints are always saved, every --checkpoint-interval steps, in <run>/checkpoints"
+NO_HUB = (
+    "these scripts upload nothing to the Hugging Face Hub: the agents are the files in <run>/checkpoints "
+    "(ppo_pgg_<kind>.load_checkpoint loads one; the README's 'Use a trained agent'), to share as they are"
+)
 CLEANRL_HABITS = {
     "--gamma": ("CleanRL's --gamma is the discount factor: here it is --discount (γ is PGG's guidance here)", False),
     "--cuda": (CPU_ONLY, False),
@@ -73,13 +77,21 @@ CLEANRL_HABITS = {
     "--no-save-model": (SAVED, False),
     "--batch-size": ("the batch size is derived: --num-envs × --num-steps", False),
     "--minibatch-size": ("the minibatch size is derived: --num-envs × --num-steps / --num-minibatches", False),
+    "--num-iterations": (
+        "the number of iterations is derived: ⌈--total-timesteps / (--num-envs × --num-steps)⌉",
+        False,
+    ),
+    "--upload-model": (NO_HUB, False),
+    "--no-upload-model": (NO_HUB, True),
+    "--hf-entity": (NO_HUB, False),
 }
 
 
 def answer_cleanrl_habits(argv: list[str]) -> list[str]:
     """`argv` without the CleanRL flags whose meaning holds here (--no-cuda, --save-model), each noted in
     one line on stderr; a CleanRL flag that means something else here (--gamma) or nothing (--cuda,
-    --batch-size) exits 2 with one line naming this project's equivalent. For a training script's tyro.cli."""
+    --batch-size, --num-iterations, --upload-model, --hf-entity) exits 2 with one line naming this project's
+    equivalent. For a training script's tyro.cli."""
     kept = []
     for i, token in enumerate(argv):
         flag = token.split("=", 1)[0].replace("_", "-") if token.startswith("--") else None

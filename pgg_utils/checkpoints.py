@@ -15,7 +15,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from pgg_utils.files import InputError, write_atomic
+from pgg_utils.files import InputError, files_under, write_atomic
 
 # 2 added what resuming needs ("resume") and the package versions; format 1 still loads for evaluation.
 CHECKPOINT_FORMAT_VERSION = 2
@@ -71,7 +71,7 @@ def find_checkpoints(paths, steps=None, skipped: list[str] | None = None) -> lis
         path = Path(raw)
         if not path.exists():
             raise InputError(f"no such file or directory: {raw}")
-        matches = [path] if path.is_file() else sorted(path.rglob(f"checkpoints/{CHECKPOINT_GLOB}"))
+        matches = [path] if path.is_file() else files_under(path, f"checkpoints/{CHECKPOINT_GLOB}")
         if skipped is not None:
             skipped.extend(misnamed_checkpoint(m) for m in matches if m != path and checkpoint_step(m) is None)
         matches = [m for m in matches if m == path or checkpoint_step(m) is not None]

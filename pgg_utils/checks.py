@@ -15,6 +15,34 @@ from pgg_utils.guidance import schedule_error
 from pgg_utils.identity import Configuration
 from pgg_utils.scripts import ORIGINALS, REPOSITORY
 
+# Ids that a module registers when it is imported, by their start: gym.make finds them with the module named
+# first (`module:id`), and what installs it. dm-control 1.0.14, the release for MuJoCo 2.3.7, fails on numpy 2.
+REGISTERED_ON_IMPORT = {
+    "dm_control/": ("shimmy", "pip install 'shimmy[dm-control]'"),
+    "MiniGrid-": ("minigrid", "pip install minigrid"),
+    "BabyAI-": ("minigrid", "pip install minigrid"),
+    "ALE/": ("ale_py", "pip install ale-py"),
+}
+DM_CONTROL_NUMPY = (
+    "dm-control 1.0.14, the release for MuJoCo 2.3.7, fails on numpy 2: use an environment with numpy<2 "
+    "(docs/usage.md, Train)"
+)
+
+
+def make_hint(env_id: str, error: Exception) -> str:
+    """What to add to gym.make's error for `env_id`: the module to name before an id that a module registers (an
+    unknown name or namespace otherwise), and for dm_control's tasks the numpy limit; "" where there is nothing."""
+    task = env_id.split(":", 1)[-1]
+    hints = []
+    if isinstance(error, (gym.error.NamespaceNotFound, gym.error.NameNotFound)) and ":" not in env_id:
+        module, install = next((m for start, m in REGISTERED_ON_IMPORT.items() if task.startswith(start)), (None, None))
+        hints.append(f"{module} registers it when imported: --env-id {module}:{task} ({install})" if module else
+                     "a task that a module registers needs the module named first, --env-id module:Id "
+                     "(shimmy:dm_control/..., minigrid:MiniGrid-...)")  # fmt: skip
+    if task.startswith("dm_control/"):
+        hints.append(DM_CONTROL_NUMPY)
+    return "".join(f"; {hint}" for hint in hints)
+
 
 def argument_error(args, kind: str, script: str | Path | None = None) -> str | None:
     """A one-line description of what is wrong with the `args` of training script `script` (None: the
@@ -56,12 +84,12 @@ def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=Non
     except ImportError as e:
         if env_id == "Pusher-v4":
             return "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); with a newer mujoco use Pusher-v5"
-        return f"cannot make environment {env_id!r}: {e}"
+        return f"cannot make environment {env_id!r}: {e}{make_hint(env_id, e)}"
     except Exception as e:  # unknown ids, missing dependencies, a bad MUJOCO_GL: whatever the env's import raises
         backend = os.environ.get("MUJOCO_GL")
         hint = (f" (MUJOCO_GL={backend}: is its library installed? osmesa needs apt-get install libosmesa6, egl "
                 "libegl1)" if backend and capture_video else "")  # fmt: skip
-        return f"cannot make environment {env_id!r}: {e}{hint}"
+        return f"cannot make environment {env_id!r}: {e}{hint}{make_hint(env_id, e)}"
     action_space, observation_space = env.action_space, env.observation_space
     error = video_error(env) if capture_video else None
     env.close()

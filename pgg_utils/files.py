@@ -7,6 +7,7 @@ import fcntl
 import hashlib
 import io
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -52,6 +53,20 @@ def one_line_errors():
     except OSError as e:
         print(f"error: {os_error_line(e)}", file=sys.stderr)
         sys.exit(exit_status(e))
+
+
+def files_under(folder: Path, pattern: str) -> list[Path]:
+    """The files below `folder` whose path ends as `pattern` does (Path.match: `checkpoints/step_*.pt`), sorted.
+    Links to folders are followed, each folder searched once, so that a folder of symlinks to run directories is
+    searched as the run directories are (Path.rglob follows none) and a link cycle ends."""
+    found, searched = [], set()
+    for root, folders, names in os.walk(folder, followlinks=True):
+        if os.path.realpath(root) in searched:
+            folders[:] = []
+            continue
+        searched.add(os.path.realpath(root))
+        found += [Path(root) / name for name in names if (Path(root) / name).match(pattern)]
+    return sorted(found)
 
 
 @contextlib.contextmanager
@@ -169,34 +184,55 @@ def check_writable(*directories: Path) -> None:
 # --- a folder's manifest: which of its files a command wrote, so that a rerun removes the stale ones ---
 
 MANIFEST = "outputs.txt"
+SHA256 = re.compile(r"[0-9a-f]{64}")
 
 
-def read_manifest(folder: Path) -> set[str]:
-    """The outputs the previous run into `folder` listed (paths relative to it); none without a manifest."""
+def read_manifest(folder: Path) -> dict[str, str | None]:
+    """{name: its sha256 as written} of the outputs the previous run into `folder` listed (paths relative to it);
+    none without a manifest. A name listed without a digest (added by hand, or by a version before digests) maps
+    to None: it was never shown to be a file the command wrote."""
     path = Path(folder) / MANIFEST
     if not path.is_file():
-        return set()
-    return {line for line in path.read_text().splitlines() if line and not line.startswith("#")}
+        return {}
+    listed = {}
+    for line in path.read_text().splitlines():
+        if line and not line.startswith("#"):
+            digest, separator, name = line.partition("  ")
+            listed.update({name: digest} if separator and SHA256.fullmatch(digest) else {line: None})
+    return listed
 
 
-def write_manifest(folder: Path, names: set[str], writer: str) -> None:
-    header = f"# the files {writer} wrote into this folder; a rerun removes those it does not write again\n"
-    write_atomic(Path(folder) / MANIFEST, header + "".join(f"{name}\n" for name in sorted(names)))
+def write_manifest(folder: Path, written: set[str], writer: str, kept: dict[str, str | None] | None = None) -> None:
+    """Lists the files `writer` wrote into `folder` (`written`, names relative to it) with the sha256 of each as it
+    is now, in sha256sum's format (`sha256sum -c outputs.txt` checks them), and the `kept` entries of an earlier
+    manifest with the digests it recorded (a name it held without one is dropped: no file is vouched for here
+    that the command did not write)."""
+    entries = {name: digest for name, digest in (kept or {}).items() if digest} | {
+        name: sha256_of(Path(folder) / name) for name in written
+    }
+    header = (f"# the files {writer} wrote into this folder, each with its sha256; a rerun removes those it does not "
+              "write again, where they are still the files it wrote\n")  # fmt: skip
+    write_atomic(Path(folder) / MANIFEST, header + "".join(f"{entries[name]}  {name}\n" for name in sorted(entries)))
 
 
-def remove_stale(folder: Path, names: set[str]) -> list[Path]:
-    """Removes the listed files, and only files inside `folder` (never the manifest itself, a folder or
-    a link's target, never a path that leaves `folder`); returns those removed."""
-    removed = []
-    for name in sorted(names):
+def remove_stale(folder: Path, listed: dict[str, str | None]) -> tuple[list[Path], list[Path]]:
+    """Removes the listed files (read_manifest's entries) whose bytes are still those their manifest records, and
+    only files inside `folder` (never the manifest itself, a folder or a link's target, never a path that leaves
+    `folder`). Returns (those removed, those kept because they differ from their record or have none: a file
+    edited since, or named by hand)."""
+    removed, kept = [], []
+    for name, digest in sorted(listed.items()):
         relative_path = Path(name)
         path = Path(folder) / relative_path
         if relative_path.is_absolute() or ".." in relative_path.parts or name == MANIFEST:
             continue
         if path.is_file() and not path.is_symlink():
-            path.unlink()
-            removed.append(path)
-    return removed
+            if digest is not None and sha256_of(path) == digest:
+                path.unlink()
+                removed.append(path)
+            else:
+                kept.append(path)
+    return removed, kept
 
 
 # --- a folder's record: the CSVs a command wrote, by rows and digest, so that a reader can tell them whole ---

@@ -21,6 +21,10 @@ def agent_from_checkpoint(script, ckpt: dict, source: str | Path = "checkpoint")
 
 
 def load_checkpoint(script, path) -> tuple:
-    """(agent in eval mode, normalisation statistics included; the checkpoint dict) from a file, by `script`."""
+    """(agent in eval mode, normalisation statistics included; the checkpoint dict) from a file, by `script`.
+    FileNotFoundError, one line, where there is no such file (a relative path read from another folder)."""
+    if not Path(path).is_file():
+        relative = "" if Path(path).is_absolute() else f" (relative to {Path.cwd()})"
+        raise FileNotFoundError(f"no such checkpoint file: {path}{relative}")
     ckpt = checkpoints.read_checkpoint_file(path)
     return script.agent_from_checkpoint(ckpt, path), ckpt

@@ -12,8 +12,8 @@ the loss, the rollouts' numpy copy and `Agent.act` all call it. This module hold
 - the null branch of an actor whose training mode couples rows or moves statistics (BatchNorm) or draws noise
   (Dropout): computed on its own, in eval mode (`branch_pass`, `null_pass`), so it needs no batch and moves nothing;
 - `missing_methods`: the methods of `Agent` that the rest of the project calls;
-- `guided_actions`, `Agent.act`'s body (its input checks, sampling, clipping), and `trained_parameters`, whether the
-  null embedding trains."""
+- `guided_actions`, `Agent.act`'s body (its input checks, the noise's among them, sampling, clipping), and
+  `trained_parameters`, whether the null embedding trains."""
 
 import copy
 import math
@@ -272,22 +272,62 @@ def acting_guidance(obs: np.ndarray, shape: tuple, guidance) -> np.ndarray:
     return guidance
 
 
-def guided_actions(agent, obs: np.ndarray, guidance, deterministic: bool, noise, null, draw_noise) -> np.ndarray:
+def guided_actions(
+    agent, obs: np.ndarray, guidance, deterministic: bool, noise, null, draw_noise, seed=None
+) -> np.ndarray:
     """`Agent.act` of both scripts, from its `acting_policy`: the actions of one observation or a batch (of the
     agent's `obs_shape`, checked by acting_guidance) at `guidance`, the mode if `deterministic`, else sampled with
-    `noise` (drawn by `draw_noise(distribution)` if None), clipped to the agent's `action_bounds` (low, high) where
-    it has them; `null` the unconditional branch where the caller holds it."""
+    `noise` (checked by noise_error) or, where it is None, with the noise `draw_noise(distribution)` draws from
+    torch's generator, or from one seeded by `seed` alone (an int or a numpy Generator; torch's own is left as it
+    was); clipped to the agent's `action_bounds` (low, high) where it has them; `null` the unconditional branch
+    where the caller holds it."""
     guidance = acting_guidance(obs, agent.obs_shape, guidance)
+    if noise is not None and seed is not None:
+        raise ValueError("pass noise or seed, not both: seed draws the noise")
     single = obs.ndim == 1
     pi = agent.acting_policy(obs[None] if single else obs, guidance, null)
     if deterministic:
         actions = pi.mode()
+    elif noise is not None:
+        noise = np.asarray(noise, dtype=np.float32)
+        if error := noise_error(noise, held_draw(draw_noise, pi, None).shape, single):
+            raise ValueError(error)
+        actions = pi.sample(noise)
     else:
-        actions = pi.sample(draw_noise(pi) if noise is None else np.asarray(noise, dtype=np.float32))
+        actions = pi.sample(draw_noise(pi) if seed is None else held_draw(draw_noise, pi, seed))
     if (bounds := getattr(agent, "action_bounds", None)) is not None:
         low, high = bounds
         actions = np.maximum(np.minimum(actions, high), low)
     return actions[0] if single else actions
+
+
+def held_draw(draw_noise, pi, seed) -> np.ndarray:
+    """`draw_noise(pi)` with torch's generator seeded by `seed` (None: as it is), which is then put back as it was:
+    `act`'s per-call seed, and the shape a given noise must have, at no cost to anyone's random stream."""
+    if seed is not None and not (isinstance(seed, np.random.Generator) or (isinstance(seed, (int, np.integer))
+                                                                            and 0 <= seed < 2**64)):  # fmt: skip
+        raise ValueError(f"seed must be an integer in [0, 2**64) or a numpy Generator, got {seed!r}")
+    state = torch.get_rng_state()
+    try:
+        if seed is not None:
+            torch.default_generator.manual_seed(int(seed.integers(2**63)) if isinstance(seed, np.random.Generator)
+                                                else int(seed))  # fmt: skip
+        return np.asarray(draw_noise(pi))
+    finally:
+        torch.set_rng_state(state)
+
+
+def noise_error(noise: np.ndarray, drawn: tuple, single: bool) -> str | None:
+    """What `act` says of a `noise` that is not the shape of the noise it would draw itself (`drawn`: one row per
+    observation; one observation also takes that row alone), or that holds a NaN or an infinity (a NaN action, an
+    action at its bound, or an arbitrary argmax), or None."""
+    wanted = [drawn[1:], drawn] if single else [drawn]
+    if noise.shape not in wanted:
+        rows = "one observation" if single else f"{drawn[0]} observations"
+        return f"noise has shape {noise.shape}; for {rows} the agent's noise is {' or '.join(map(str, wanted))}"
+    if not np.isfinite(noise).all():
+        return "noise holds a NaN or an infinity"
+    return None
 
 
 def trained_parameters(agent, guided: bool, probe_loss) -> list:

@@ -19,7 +19,10 @@ def cell_of(row: dict) -> tuple:
 def check_one_run_per_seed(rows, configuration, cell, source=lambda row: None) -> None:
     """InputError (one line) where two runs would count as the same seed of one configuration
     (`configuration(row)`: env, variant, config, ...), or one episode of a cell (`cell(row)`: step, γ,
-    evaluation mode) appears twice. `source(row)` names where a row was read from, for the message."""
+    evaluation mode) appears twice. An episode is its reset seed where the row records one (`episode_seed`):
+    two sweeps of one checkpoint with other --eval-seed values hold other episodes, pooled as one sweep's
+    would be, while an episode index alone repeats in every sweep. `source(row)` names where a row was read
+    from, for the message."""
     run_of, seen = {}, {}
     for row in rows:
         key, seed, run, where = configuration(row), str(row["seed"]), str(row.get("run", "")), source(row)
@@ -30,14 +33,16 @@ def check_one_run_per_seed(rows, configuration, cell, source=lambda row: None) -
                              "must be one run (give them different configurations, or sweep and plot them apart)")  # fmt: skip
         if "episode" not in row:
             continue
-        episode = (key, seed, run, *cell(row), str(row["episode"]))
+        reset_seed = str(row.get("episode_seed") or "")
+        episode = (key, seed, run, *cell(row), reset_seed or str(row["episode"]))
         if episode in seen:
             first = seen[episode]
             twice = (
                 "twice" if first is None else f"in {first} twice" if first == where else f"in both {first} and {where}"
             )
-            raise InputError(f"episode {row['episode']} of run {run} ({' '.join(map(str, cell(row)))}) appears {twice}: "
-                             "pass each sweep once")  # fmt: skip
+            which = f"episode {row['episode']}" + (f" (reset seed {reset_seed})" if reset_seed else "")
+            raise InputError(f"{which} of run {run} ({' '.join(map(str, cell(row)))}) appears {twice}: one episode "
+                             "counted twice; pass each sweep once")  # fmt: skip
         seen[episode] = where
 
 

@@ -8,6 +8,7 @@ import math
 import os
 import sys
 import threading
+import traceback
 from collections import deque
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -97,7 +98,9 @@ class Run:
         args = self.args
         latest, unreadable = self.last_readable_checkpoint() if not args.overwrite else (None, [])
         if not args.overwrite and (error := record_error(self.dir, self.loaded if latest else None)):
-            raise RunDirError(f"{error}: restore it, or pass --overwrite to start over")
+            raise RunDirError(
+                self.foreign_checkpoint(latest) or f"{error}: restore it, or pass --overwrite to start over"
+            )
         if latest is not None:
             self.check_continuable(latest)
         elif unreadable and not args.resume:
@@ -147,6 +150,20 @@ class Run:
         if differing := self.differing(recorded):
             raise RunDirError(f"{self.dir} holds {what} of a run with other arguments ({', '.join(differing)}): "
                               "choose another --run-name, or pass --overwrite to replace them")  # fmt: skip
+
+    def foreign_checkpoint(self, latest: Path | None) -> str | None:
+        """Why `latest`, which disagrees with args.json, is the odd one out where args.json holds this command's own
+        training arguments: a checkpoint of another run copied in (one line naming it, not args.json), or None."""
+        try:
+            recorded = read_args_json(self.dir)
+        except ValueError:
+            return None
+        if latest is None or recorded is None or self.differing(recorded):
+            return None
+        theirs = ", ".join(self.differing(self.loaded.get("args", {})))
+        return (f"{latest} is not this run's checkpoint: it was written by run {self.loaded.get('run', '?')} "
+                f"({theirs}: as recorded -> as {self.dir / 'args.json'} and this command have it); move it out of "
+                f"{latest.parent}, or pass --overwrite to start over")  # fmt: skip
 
     def last_readable_checkpoint(self) -> tuple[Path | None, list[tuple[Path, str]]]:
         """(the last checkpoint that loads, [(each later one that does not, why)]) (last_readable). Reads,
@@ -333,12 +350,27 @@ def train_in_process(script, args) -> Path:
     return run.dir
 
 
+# gymnasium's vector envs, through whose step and reset a sub-env's (the task's) exception reaches training
+VECTOR_ENV_FILES = ("sync_vector_env.py", "async_vector_env.py")
+
+
+def task_failure(error: BaseException) -> str | None:
+    """`the task raised X: its message, in its step()` where `error` came out of a sub-env's step or reset through
+    gymnasium's vector env (the task's own code, or a wrapper on it), as the sweep says of its episodes; None for
+    any other error (the training script's own, whose traceback is the report)."""
+    calls = [f.name for f in traceback.extract_tb(error.__traceback__) if Path(f.filename).name in VECTOR_ENV_FILES]
+    if not any(call in ("step", "reset") for call in calls):
+        return None
+    message = f"{type(error).__name__}: {str(error).splitlines()[0]}" if str(error) else type(error).__name__
+    return f"the task raised {message}, in its {next(c for c in calls if c in ('step', 'reset'))}()"
+
+
 def launch(args, kind: str, script: str, train) -> None:
     """A training script's `main` after parsing: checks every argument before the disk is touched,
     prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
     files.exit_status's rule: exit 2 for bad arguments or a run directory that must not be used or
-    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts) or a non-finite run
-    (its earlier checkpoints kept)."""
+    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts), a non-finite run or a
+    task that raises in its step or reset (task_failure; the earlier checkpoints kept, and named)."""
     error, status = argument_error(args, kind), 2
     run = None
     if error is None:
@@ -386,6 +418,14 @@ def launch(args, kind: str, script: str, train) -> None:
             message = e.strerror if written else f"cannot write {events[-1] if events else run.dir}: {e.strerror or e}"
             message += f"; checkpoints up to {latest.name} are kept" if latest else ""
         print(f"error: {message}", file=sys.stderr)
+        sys.exit(1)
+    except Exception as e:
+        if (failed := task_failure(e)) is None:
+            raise  # the script's own fault: its traceback is the report
+        latest = latest_checkpoint(run.dir)
+        kept = f"checkpoints up to {latest.name} are kept: fix the task and continue with --resume" if latest else (
+            "no checkpoint was written: fix the task and start it again")  # fmt: skip
+        print(f"error: {failed} while {run.dir} trained; {kept}", file=sys.stderr)
         sys.exit(1)
     finally:
         run.close()

@@ -31,7 +31,7 @@ from paper_study.stats import (
     welch_power,
 )
 from pgg_utils import identity
-from pgg_utils.files import LOCK_FILE, lock_directory, read_csv, write_record
+from pgg_utils.files import LOCK_FILE, lock_directory, read_csv, read_manifest, write_record
 
 # Per-seed mean returns of the synthetic sweep: (env, variant, step, eval γ) -> three seed means.
 # Two episodes per seed, at mean ± 1. With means m, m+1, m+2 the summary is (m+1) ± t(.975,2)·1/√3 = ± 2.5.
@@ -493,7 +493,7 @@ def test_a_rerun_removes_the_outputs_of_the_previous_run_it_does_not_write_again
         return plots.generate(plots.Args(sweeps=(str(tmp_path / sweep),), output=str(out)))
 
     def listed() -> set:
-        return set((out / "outputs.txt").read_text().splitlines()[1:])
+        return set(read_manifest(out))
 
     first = run("both.csv")
     assert out / "outputs.txt" in first and listed() == {p.name for p in first} - {"outputs.txt"}
@@ -1022,7 +1022,7 @@ def test_a_replot_into_the_same_folder_drops_the_last_plots_learning_curves(tmp_
     assert {out / "learning_curves.png", out / "learning_curves.pdf"} <= set(first)
     second = plots.generate(plots.Args(sweeps=(str(tmp_path / "b.csv"),), output=str(out)))
     assert not (out / "learning_curves.png").exists() and not (out / "learning_curves.pdf").exists()
-    listed = set((out / "outputs.txt").read_text().splitlines()[1:])
+    listed = set(read_manifest(out))
     assert listed == {p.name for p in second} - {"outputs.txt"} and not any("learning_curves" in n for n in listed)
     (out / "outputs.txt").unlink()  # as in a fresh clone of results/, whose curves no manifest lists
     (out / "learning_curves.png").write_bytes(b"committed, drawn from runs that are not committed")

@@ -130,8 +130,8 @@ ONE_PATH = {
     ),
     "act": (
         "ppo_pgg_discrete.py",
-        ("        return guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw)  # PGG\n",
-         ("        actions = guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw)\n"
+        ("        return guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw, seed)  # PGG\n",
+         ("        actions = guided_actions(self, obs, guidance, deterministic, noise, logits_null, draw, seed)\n"
           "        return self.acting_policy(obs, np.asarray(guidance)).logits.argmin(-1) if deterministic else actions\n")),
         "Agent.act's deterministic actions differ from guided_policy's mode at guidance 1.3",
     ),
