@@ -38,7 +38,7 @@ from torch import nn
 from pgg_utils import loading, runs, spaces, training_state
 from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
 from pgg_utils.distributions import Gaussian, guide  # PGG: guide, the mix of the branches' parameters
-from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network
+from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm
 from pgg_utils.policy import (
@@ -232,18 +232,10 @@ class Agent(nn.Module):
         return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
 
     def acting_policy(self, raw_obs: np.ndarray, guidance, mean_null=None):  # PGG
-        """pi_hat for a batch of raw observations, in numpy (`act` samples from it); `mean_null` where the
-        caller holds the unconditional mean."""
-        obs = self.obs_norm.normalise(raw_obs)
-        mean_cond = evaluation_forward(self.actor_mean, obs)
-        if self.null_mask is not None:  # PGG: one null input per row
-            mean_null = evaluation_forward(self.actor_mean, self.null_input(obs))  # PGG
-        elif mean_null is None:  # PGG
-            mean_null = self.unconditional_mean().detach().numpy()  # PGG
-        logstd, logstd_null = self.actor_logstd.detach(), self.null_logstd().detach()  # PGG
-        cond = Gaussian(mean_cond, logstd.numpy()[0], logstd.exp()[0].numpy())
-        null = Gaussian(mean_null, logstd_null.numpy()[0], logstd_null.exp()[0].numpy())  # PGG
-        return numpy_policy(guided_policy, cond, null, guidance)  # PGG
+        """pi_hat for a batch of raw observations, in numpy (`act` samples from it), by the fast path (FastPolicy);
+        `mean_null` where the caller holds the unconditional mean."""
+        fast = FastPolicy(self, acting=True, mean_null=mean_null)  # PGG
+        return fast.distribution(self.obs_norm.normalise(raw_obs), guidance)  # PGG
 
     @torch.no_grad()
     def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None, seed=None) -> np.ndarray:  # PGG  # fmt: skip
@@ -298,34 +290,52 @@ def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  
 # training ~1.3x faster, with the same float32 arithmetic (benchmarks/README.md; agreement: tests/test_equivalence.py).
 
 
-class RolloutPolicy:
-    """pi_hat and the critic for acting during one rollout, on views of the agent's weights (fixed until the update)
-    and observation statistics: the networks' numpy copies and guided_policy on their outputs (pgg_utils/policy.py).
-    It caches pi(.|null) and σ: build one per rollout."""
+class FastPolicy:
+    """pi_hat and the critic in numpy, derived from the agent's modules and guided_policy (pgg_utils/policy.py): the
+    one fast path of every actor, beside the loss's torch. For a rollout (`FastPolicy(agent, guidance)`): the networks'
+    numpy copies on views of the weights (fixed until the update), σ by numpy's exp, pi(.|null) cached: build one per
+    rollout. For `act` (`acting=True`: the sweep, videos, cloning, tracking): the modules' own forward, whose rounding
+    does not depend on the batch's other rows (fast.evaluation_network), σ by torch's exp: the bits every committed
+    sweep holds. `mean_null` where the caller holds the unconditional mean."""
 
-    def __init__(self, agent: Agent, guidance: float):  # PGG
-        self.actor, self.critic = numpy_network(agent.actor_mean), numpy_network(agent.critic)
+    def __init__(self, agent: Agent, guidance=None, acting: bool = False, mean_null=None):  # PGG
+        network = evaluation_network if acting else numpy_network
+        self.actor, self.critic = network(agent.actor_mean), network(agent.critic)
         self.obs_norm = agent.obs_norm  # the agent's own normaliser: the rollout's observations update it in place
         self.guidance = guidance  # PGG
-        self.logstd = agent.actor_logstd.detach().numpy()[0].copy()  # cached like σ, not a live view
-        self.std = np.exp(self.logstd)
-        self.logstd_null = agent.null_logstd().detach().numpy()[0].copy()  # PGG
-        self.std_null = np.exp(self.logstd_null)  # PGG
+        self.logstd, self.std = branch_scale(agent.actor_logstd, acting)
+        self.logstd_null, self.std_null = branch_scale(agent.null_logstd(), acting)  # PGG
         self.null_input = None if agent.null_mask is None else agent.null_input  # PGG: per-row null inputs
-        with torch.no_grad():  # PGG
-            self.mean_null = agent.unconditional_mean().numpy()  # PGG
+        if mean_null is None and self.null_input is None:  # PGG
+            with torch.no_grad():  # PGG
+                mean_null = agent.unconditional_mean().numpy()  # PGG
+        self.mean_null = mean_null  # PGG
+
+    def distribution(self, obs: np.ndarray, guidance) -> "Gaussian":  # PGG
+        """pi_hat for a batch `obs` of normalised observations at `guidance` (a number, or one per row)."""
+        mean_null = self.mean_null if self.null_input is None else self.actor(self.null_input(obs))  # PGG
+        cond = Gaussian(self.actor(obs), self.logstd, self.std)
+        null = Gaussian(mean_null, self.logstd_null, self.std_null)  # PGG
+        return numpy_policy(guided_policy, cond, null, guidance)  # PGG
 
     def act(self, obs: np.ndarray, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs` of normalised observations;
         `noise` is standard normal, shaped like the actions."""
-        mean_null = self.mean_null if self.null_input is None else self.actor(self.null_input(obs))  # PGG
-        cond = Gaussian(self.actor(obs), self.logstd, self.std)
-        null = Gaussian(mean_null, self.logstd_null, self.std_null)  # PGG
-        actions, log_probs = numpy_policy(guided_policy, cond, null, self.guidance).sample_log_prob(noise)  # PGG
+        actions, log_probs = self.distribution(obs, self.guidance).sample_log_prob(noise)  # PGG
         return actions, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
         return self.critic(obs)[:, 0]
+
+
+def branch_scale(logstd: torch.Tensor, acting: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(log σ, σ) of a branch, (action_dim,): for a rollout, copies (its parameters, not live views) with numpy's exp;
+    for `act`, views with torch's exp (their bits differ in the last place; each is what its runs and sweeps hold)."""
+    logstd = logstd.detach()
+    if acting:
+        return logstd.numpy()[0], logstd.exp()[0].numpy()
+    copy = logstd.numpy()[0].copy()
+    return copy, np.exp(copy)
 
 
 # --- rollout, GAE, loss, update ------------------------------------------------------------------
@@ -353,7 +363,7 @@ class Rollout:
         )
 
 
-def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollout, on_episode, global_step: int):
+def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout, on_episode, global_step: int):
     """Fills `buf` with num_steps transitions from the guided policy, updating the observation
     statistics as it goes, and returns the (normalised obs, done) numpy arrays to start the next
     rollout from. `on_episode(return, length, step)` is called per finished episode with its raw
@@ -616,7 +626,7 @@ def train(args: Args, run: runs.Run) -> None:
                 optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
 
             guidance = schedule.value(iteration)  # PGG
-            policy = RolloutPolicy(agent, guidance)  # PGG
+            policy = FastPolicy(agent, guidance)  # PGG
             next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, run.on_episode, global_step)
             global_step += batch_size
             next_value = policy.value(next_obs)

@@ -37,7 +37,7 @@ from torch import nn
 from pgg_utils import loading, runs, spaces, training_state
 from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
 from pgg_utils.distributions import Categorical, guide, gumbel_noise  # PGG: guide, the mix of the branches' logits
-from pgg_utils.fast import evaluation_forward, flatten_parameters, numpy_network, standard_gumbel
+from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network, standard_gumbel
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.policy import (
     PathError,
@@ -192,12 +192,9 @@ class Agent(nn.Module):
         return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
 
     def acting_policy(self, obs: np.ndarray, guidance, logits_null=None):  # PGG
-        """pi_hat for a float32 batch `obs`, in numpy (`act` samples from it); `logits_null` where the
-        caller holds the unconditional branch."""
-        logits_cond = evaluation_forward(self.actor, obs)
-        if logits_null is None:  # PGG
-            logits_null = self.unconditional_logits().detach().numpy()  # PGG
-        return numpy_policy(guided_policy, Categorical(logits_cond), Categorical(logits_null), guidance)  # PGG
+        """pi_hat for a float32 batch `obs`, in numpy (`act` samples from it), by the fast path (FastPolicy);
+        `logits_null` where the caller holds the unconditional branch."""
+        return FastPolicy(self, acting=True, logits_null=logits_null).distribution(obs, guidance)  # PGG
 
     @torch.no_grad()
     def act(self, obs, guidance=1.0, deterministic: bool = False, noise=None, logits_null=None, seed=None) -> np.ndarray:  # PGG  # fmt: skip
@@ -248,23 +245,32 @@ def guided_policy(cond: "Categorical", null: "Categorical", guidance) -> "Catego
 # training ~1.3x faster, with the same float32 arithmetic (benchmarks/README.md; agreement: tests/test_equivalence.py).
 
 
-class RolloutPolicy:
-    """pi_hat and the critic for acting during one rollout, on views of the agent's weights (they are
-    fixed until the update): the networks' numpy copies and guided_policy on their outputs
-    (pgg_utils/policy.py). It caches pi(.|null): build one per rollout."""
+class FastPolicy:
+    """pi_hat and the critic in numpy, derived from the agent's modules and guided_policy (pgg_utils/policy.py): the
+    one fast path of every actor, beside the loss's torch. For a rollout (`FastPolicy(agent, guidance)`): the networks'
+    numpy copies on views of the weights (fixed until the update), pi(.|null) cached: build one per rollout. For `act`
+    (`acting=True`: the sweep, videos, cloning): the modules' own forward, whose rounding does not depend on the
+    batch's other rows (fast.evaluation_network). `logits_null` where the caller holds the unconditional branch."""
 
-    def __init__(self, agent: Agent, guidance: float):  # PGG
-        self.actor, self.critic = numpy_network(agent.actor), numpy_network(agent.critic)
+    def __init__(self, agent: Agent, guidance=None, acting: bool = False, logits_null=None):  # PGG
+        network = evaluation_network if acting else numpy_network
+        self.actor, self.critic = network(agent.actor), network(agent.critic)
         self.guidance = guidance  # PGG
-        with torch.no_grad():  # PGG
-            self.logits_null = agent.unconditional_logits().numpy()  # PGG
+        if logits_null is None:  # PGG
+            with torch.no_grad():  # PGG
+                logits_null = agent.unconditional_logits().numpy()  # PGG
+        self.logits_null = logits_null  # PGG
         self.n_actions = len(self.logits_null)  # PGG
+
+    def distribution(self, obs: np.ndarray, guidance) -> "Categorical":  # PGG
+        """pi_hat for a batch `obs` at `guidance` (a number, or one per row)."""
+        cond, null = Categorical(self.actor(obs)), Categorical(self.logits_null)  # PGG
+        return numpy_policy(guided_policy, cond, null, guidance)  # PGG
 
     def act(self, obs: np.ndarray, gumbel: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(actions, log pi_hat(action|obs), values) for a batch `obs`. Actions are sampled by the
         Gumbel-max trick with `gumbel`, standard Gumbel noise shaped like the logits."""
-        cond, null = Categorical(self.actor(obs)), Categorical(self.logits_null)  # PGG
-        actions, log_probs = numpy_policy(guided_policy, cond, null, self.guidance).sample_log_prob(gumbel)  # PGG
+        actions, log_probs = self.distribution(obs, self.guidance).sample_log_prob(gumbel)  # PGG
         return actions, log_probs, self.value(obs)
 
     def value(self, obs: np.ndarray) -> np.ndarray:
@@ -296,7 +302,7 @@ class Rollout:
         )
 
 
-def collect_rollout(policy: RolloutPolicy, envs, next_obs, next_done, buf: Rollout, on_episode, global_step: int):
+def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout, on_episode, global_step: int):
     """Fills `buf` with num_steps transitions from the guided policy and returns the (obs, done)
     numpy arrays to start the next rollout from. `on_episode(return, length, step)` is called per
     finished episode with the global step at which it ended (CleanRL's logging step); `global_step`
@@ -550,7 +556,7 @@ def train(args: Args, run: runs.Run) -> None:
                 optimizer.param_groups[0]["lr"] = (1.0 - (iteration - 1.0) / num_iterations) * args.learning_rate
 
             guidance = schedule.value(iteration)  # PGG
-            policy = RolloutPolicy(agent, guidance)  # PGG
+            policy = FastPolicy(agent, guidance)  # PGG
             next_obs, next_done = collect_rollout(policy, envs, next_obs, next_done, buf, run.on_episode, global_step)
             global_step += batch_size
             next_value = policy.value(next_obs)

@@ -107,6 +107,12 @@ def evaluation_forward(network: nn.Module, x: np.ndarray) -> np.ndarray:
         return network(padded).numpy()[:rows]
 
 
+def evaluation_network(network: nn.Module):
+    """`network`'s forward for acting with a trained agent (evaluation_forward), as a function of a float32 numpy
+    batch: the evaluation's counterpart of numpy_network."""
+    return lambda x: evaluation_forward(network, x)
+
+
 def standard_gumbel(uniform: np.ndarray) -> np.ndarray:
     """Standard Gumbel noise, in the dtype of `uniform` (samples in [0, 1); a 0 is raised to float32's
     smallest normal number, so the logarithms stay finite): argmax(logits + noise) is an exact

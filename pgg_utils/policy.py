@@ -157,7 +157,7 @@ def path_error(script, agent, args, raw_obs: np.ndarray, normalise, noise: np.nd
     `normalise` turns it into the actor's input; `noise` the rollouts' kind, one row per observation): one line
     naming the first path that disagrees with the definition (`agent.policy`, which calls `guided_policy`), or None.
     At γ = PROBE_GUIDANCE and at 1 (the loss then takes None, PPO's own pass):
-    - the rollouts (`RolloutPolicy.act`) sample what the definition samples with the same noise, with its log-probs;
+    - the rollouts (`FastPolicy.act`) sample what the definition samples with the same noise, with its log-probs;
     - the loss (`minibatch_loss`) gives the rollout's actions the rollout's log-probs: the first ratio is 1;
     - `Agent.act` acts as the definition does, deterministic and sampled, one guidance per row as the sweep asks.
     Runs in eval mode and restores torch's RNG state: nothing trained, moved or drawn."""
@@ -205,7 +205,7 @@ def first_ratio_error(script, agent, batch: dict, rows, guidance, args) -> None:
     if math.isfinite(kl) and kl > LIVE_MAX_KL:
         raise PathError(
             f"the first minibatch's ratio is not 1 (approx_kl {kl:.3g} before any step): minibatch_loss's "
-            "log-probabilities of the rollout's actions differ from the rollouts' own (RolloutPolicy.act)"
+            "log-probabilities of the rollout's actions differ from the rollouts' own (FastPolicy.act)"
         )
 
 
@@ -214,12 +214,12 @@ def probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidanc
     at = f"at guidance {guidance:g} on a probe batch"
     with torch.no_grad():
         defined = agent.policy(torch.from_numpy(obs), loss_guidance)
-        actions, log_probs, _ = script.RolloutPolicy(agent, guidance).act(obs, noise)
+        actions, log_probs, _ = script.FastPolicy(agent, guidance).act(obs, noise)
         expected = defined.sample(torch.from_numpy(noise))
         if not close(actions, expected):
-            return f"the rollouts' actions (RolloutPolicy.act) differ from guided_policy's samples {at}"
+            return f"the rollouts' actions (FastPolicy.act) differ from guided_policy's samples {at}"
         if not close(log_probs, defined.log_prob(torch.from_numpy(actions))):
-            return f"the rollouts' log-probabilities (RolloutPolicy.act) differ from guided_policy's {at}"
+            return f"the rollouts' log-probabilities (FastPolicy.act) differ from guided_policy's {at}"
     rows = len(obs)
     batch = {"obs": torch.from_numpy(obs), "actions": torch.from_numpy(actions),
              "logprobs": torch.from_numpy(np.asarray(log_probs, np.float32)), "advantages": torch.ones(rows),

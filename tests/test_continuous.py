@@ -148,7 +148,7 @@ def test_episodes_are_reported_with_raw_returns_at_the_step_they_end():
     obs, _ = envs.reset(seed=0)
     buf = pgg.Rollout.empty(200, 1, 4, 1)
     torch.manual_seed(0)
-    policy, episodes = pgg.RolloutPolicy(pgg.Agent(4, 1), 1.0), []
+    policy, episodes = pgg.FastPolicy(pgg.Agent(4, 1), 1.0), []
     _, next_done = pgg.collect_rollout(
         policy, envs, policy.obs_norm.observe(obs), np.zeros(1, np.float32), buf,
         lambda r, l, step: episodes.append((r, l, step)), global_step=4096,
@@ -173,7 +173,7 @@ def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
     monkeypatch.setattr(pgg, "make_env", short)
     envs = pgg.make_vector_env("Hopper-v4", 1, seed=3, discount=0.99, reward_clip=10.0)
     agent = pgg.Agent(11, 3)
-    policy = pgg.RolloutPolicy(agent, 1.0)
+    policy = pgg.FastPolicy(agent, 1.0)
     buf = pgg.Rollout.empty(400, 1, 11, 3)
     raw_obs, _ = envs.reset(seed=3)
     _next_obs, _next_done = pgg.collect_rollout(
@@ -272,7 +272,7 @@ def test_paper_task_steps_through_env_factory(env_id):
     envs = pgg.make_vector_env(env_id, 2, seed=0, discount=0.99, reward_clip=10.0)
     obs, _ = envs.reset(seed=0)
     agent = pgg.Agent(obs.shape[1], envs.single_action_space.shape[0])
-    policy = pgg.RolloutPolicy(agent, 1.1)
+    policy = pgg.FastPolicy(agent, 1.1)
     buf = pgg.Rollout.empty(300, 2, obs.shape[1], envs.single_action_space.shape[0])
     _, next_done = pgg.collect_rollout(
         policy, envs, policy.obs_norm.observe(obs), np.zeros(2, np.float32), buf, lambda *_: None, 0

@@ -195,7 +195,7 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     buf = pgg.Rollout.empty(7, 2, 2)
     episodes = []
     next_obs, next_done = pgg.collect_rollout(
-        pgg.RolloutPolicy(pgg.Agent(2, 2), 1.0), envs, obs, np.zeros(2, np.float32), buf,
+        pgg.FastPolicy(pgg.Agent(2, 2), 1.0), envs, obs, np.zeros(2, np.float32), buf,
         lambda r, l, step: episodes.append((r, l, step)), global_step=100,
     )  # fmt: skip
     # env 0: episodes of 3 steps. Every stored obs is a pre-action state; a terminal obs never is.
@@ -243,7 +243,7 @@ def test_same_seed_same_result(tmp_path):
 
 def evaluate(agent, guidance, episodes=10, seed=1000):
     env = gym.make("CartPole-v1")
-    policy, rng = pgg.RolloutPolicy(agent, guidance), np.random.default_rng(seed)
+    policy, rng = pgg.FastPolicy(agent, guidance), np.random.default_rng(seed)
     returns = []
     for episode in range(episodes):
         obs, _ = env.reset(seed=seed + episode)

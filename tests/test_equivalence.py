@@ -18,7 +18,7 @@ def test_gumbel_max_sampling_matches_categorical_probabilities():
         agent.actor[-1].weight.zero_()
         agent.actor[-1].bias.copy_(logits)
     n = 200_000
-    actions, _, _ = discrete.RolloutPolicy(agent, 1.0).act(np.zeros((n, 4), np.float32), discrete.gumbel_noise(n, 4))
+    actions, _, _ = discrete.FastPolicy(agent, 1.0).act(np.zeros((n, 4), np.float32), discrete.gumbel_noise(n, 4))
     counts = np.bincount(actions, minlength=4)
     expected = logits.softmax(-1).numpy() * n
     assert stats.chisquare(counts, expected).pvalue > 1e-3
@@ -83,7 +83,7 @@ def test_numpy_rollout_policy_matches_agent(guidance):
     with torch.no_grad():
         agent.null_obs.normal_()
         logits = agent.policy(obs, guidance).logits
-        actions, logprobs, values = discrete.RolloutPolicy(agent, guidance).act(obs.numpy(), gumbel)
+        actions, logprobs, values = discrete.FastPolicy(agent, guidance).act(obs.numpy(), gumbel)
         assert np.array_equal(actions, (logits + torch.from_numpy(gumbel)).argmax(-1).numpy())
         expected = logits.log_softmax(-1).gather(-1, torch.from_numpy(actions).unsqueeze(-1)).squeeze(-1)
         torch.testing.assert_close(torch.from_numpy(logprobs), expected, rtol=1e-5, atol=1e-6)
@@ -94,7 +94,7 @@ def test_numpy_rollout_policy_matches_agent(guidance):
     with torch.no_grad():
         cagent.null_obs.normal_()
         cagent.actor_logstd.fill_(-1.0)
-        policy = continuous.RolloutPolicy(cagent, guidance)
+        policy = continuous.FastPolicy(cagent, guidance)
         obs = policy.obs_norm.observe(raw)
         actions, logprobs, values = policy.act(obs, noise)
         pi = cagent.policy(torch.from_numpy(obs), guidance)

@@ -242,7 +242,7 @@ def test_a_goal_null_embedding_replaces_only_the_goal_dimensions():
     assert (nulled[:, goal] == 7.0).all() and torch.equal(nulled[:, rest], obs[:, rest])
     np.testing.assert_array_equal(agent.null_input(obs.numpy()), nulled.detach().numpy())
     with torch.no_grad():  # the rollouts' numpy policy and the update's torch one agree
-        policy = ppo_pgg_continuous.RolloutPolicy(agent, 1.5)
+        policy = ppo_pgg_continuous.FastPolicy(agent, 1.5)
         noise = np.zeros((5, 2), np.float32)
         actions, _, _ = policy.act(obs.numpy(), noise)
         torch.testing.assert_close(torch.from_numpy(actions), agent.policy(obs, 1.5).mean, rtol=1e-5, atol=1e-6)
@@ -402,7 +402,7 @@ def test_rollouts_and_act_mix_the_two_branches_through_guide_alone(kind, monkeyp
     monkeypatch.setattr(module, "guide", lambda cond, *rest: mixed.append(type(cond)) or real_guide(cond, *rest))
     rng = np.random.default_rng(0)
     obs, noise = rng.normal(size=(5, 4)).astype(np.float32), rng.normal(size=(5, 3)).astype(np.float32)
-    module.RolloutPolicy(agent, 1.3).act(obs, noise)
+    module.FastPolicy(agent, 1.3).act(obs, noise)
     agent.act(obs, np.linspace(0.0, 3.0, 5), deterministic=True)
     assert mixed == [np.ndarray, np.ndarray]
     cond, null, per_row = (

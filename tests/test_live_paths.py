@@ -53,7 +53,7 @@ def test_a_null_branch_with_its_own_sigma_that_the_fast_path_ignores_stops_befor
     """The probe runs on a copy of the agent with every parameter drawn at random: the null's own σ and the policy's
     differ there, so the rollouts (which read null_logstd) disagree with the definition, one line, exit 2."""
     done = train_fork(fork(tmp_path, *OWN_NULL_SIGMA), tmp_path, "--guidance", "2")
-    assert "RolloutPolicy.act" in one_line_error(done, 2)
+    assert "FastPolicy.act" in one_line_error(done, 2)
 
 
 def test_the_probe_copy_draws_every_parameter_and_buffer_and_moves_no_global_rng():
@@ -124,7 +124,7 @@ def test_a_path_that_goes_stale_as_the_agent_trains_stops_at_the_next_update(tmp
     before it kept, exit 1."""
     done = train_fork(fork(tmp_path, *MEMOISED_NULL), tmp_path, "--guidance", "2", "--learning-rate", "0.01")
     line = one_line_error(done, 1)
-    assert "the first minibatch's ratio is not 1" in line and "RolloutPolicy.act" in line
+    assert "the first minibatch's ratio is not 1" in line and "FastPolicy.act" in line
 
 
 # `act` alone memoises the unconditional mean (the sweep's path, which training never calls): right on the probe's

@@ -119,7 +119,7 @@ ONE_PATH = {
         "ppo_pgg_continuous.py",
         ("        return actions, log_probs, self.value(obs)\n",
          "        return np.tanh(actions), log_probs, self.value(obs)  # squashed here only\n"),
-        "the rollouts' actions (RolloutPolicy.act) differ from guided_policy's samples at guidance 1.3",
+        "the rollouts' actions (FastPolicy.act) differ from guided_policy's samples at guidance 1.3",
     ),
     "loss": (
         "ppo_pgg_continuous.py",
@@ -216,7 +216,7 @@ def test_the_null_branch_moves_no_batch_norm_statistics(kind):
     before = {name: value.clone() for name, value in norm.state_dict().items()}
     obs = torch.randn(16, 4)
     with torch.no_grad():  # the rollouts and the diagnostics move nothing
-        module.RolloutPolicy(agent, 1.5).act(obs.numpy(), np.zeros((16, 3), np.float32))
+        module.FastPolicy(agent, 1.5).act(obs.numpy(), np.zeros((16, 3), np.float32))
         module.guidance_diagnostics(agent, obs, 1.5)
     assert all(torch.equal(value, norm.state_dict()[name]) for name, value in before.items())
     getattr(agent, network)(obs)  # PPO's update: the batch alone moves the statistics
@@ -377,6 +377,6 @@ def test_a_definition_written_for_torch_alone_acts_through_torch(monkeypatch):
     assert isinstance(pi, policy.TorchDefined) and isinstance(pi.logits, np.ndarray)
     np.testing.assert_array_equal(agent.act(obs, np.full(5, 1.7), deterministic=True), expected)
     assert agent.act(obs, 1.7).shape == (5,)  # its own noise, shaped by the logits
-    actions, log_probs, _ = module.RolloutPolicy(agent, 1.7).act(obs, module.gumbel_noise(5, 3))
+    actions, log_probs, _ = module.FastPolicy(agent, 1.7).act(obs, module.gumbel_noise(5, 3))
     expected_log_probs = agent.policy(torch.from_numpy(obs), 1.7).log_prob(torch.from_numpy(actions))
     np.testing.assert_allclose(log_probs, expected_log_probs.detach().numpy(), rtol=1e-5, atol=1e-6)

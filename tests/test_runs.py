@@ -333,7 +333,7 @@ def test_kl_statistics_cover_kept_rows_only(kind):
             if isinstance(layer, torch.nn.Linear):
                 layer.weight.normal_(0, 1.0)  # a policy far from uniform, so dropped rows really differ
     buf.obs.normal_()
-    policy = module.RolloutPolicy(agent, 1.1)
+    policy = module.FastPolicy(agent, 1.1)
     noise = (
         module.gumbel_noise(256, action_dim)
         if kind == "discrete"
