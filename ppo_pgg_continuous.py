@@ -639,7 +639,7 @@ def train(args: Args, run: runs.Run) -> None:
             loss_guidance = (torch.tensor(guidance) if scheduled else guidance) if guided else None  # PGG
             # On the parameters that acted, the loss gives the rollout's actions the rollout's log-probs (ratio 1).
             batch = flatten_rollout(buf, advantages, returns)
-            first_ratio_error(sys.modules[__name__], agent, batch, probe_rows, loss_guidance, args)
+            first_ratio_error(sys.modules[__name__], agent, batch, probe_rows, loss_guidance, args)  # PGG
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
             stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
             schedule.observe(stats)  # PGG: the adaptive rule's step

@@ -127,13 +127,13 @@ def test_a_path_that_goes_stale_as_the_agent_trains_stops_at_the_next_update(tmp
     assert "the first minibatch's ratio is not 1" in line and "FastPolicy.act" in line
 
 
-# `act` alone memoises the unconditional mean (the sweep's path, which training never calls): right on the probe's
-# copy and at the first checkpoint, stale at the next.
+# `act` alone memoises its fast path (the sweep's path, which training never calls): right on the probe's copy and at
+# the first checkpoint, stale at the next.
 MEMOISED_ACTING_NULL = (
-    ("            mean_null = self.unconditional_mean().detach().numpy()  # PGG\n",
-     ("            if getattr(self, \"acting_memo\", None) is None:\n"
-     "                self.acting_memo = self.unconditional_mean().detach().numpy()\n"
-     "            mean_null = self.acting_memo\n")),
+    ("        fast = FastPolicy(self, acting=True, mean_null=mean_null)  # PGG\n",
+     ("        if getattr(self, \"acting_memo\", None) is None:\n"
+      "            self.acting_memo = FastPolicy(self, acting=True, mean_null=mean_null)\n"
+      "        fast = self.acting_memo\n")),
 )  # fmt: skip
 
 
