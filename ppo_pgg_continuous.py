@@ -104,15 +104,16 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
 
 
 def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None = None):
-    """The task as the agent sees it, for training, the sweep and --video alike: tasks.task_env's, which records every
-    reported return (training's charts/episodic_return, the sweep's) on gym.make's env, below each wrapper added here.
-    Reward shaping, a reward scale or a frame stack wraps what task_env returns, in `thunk`: it shapes what the agent
-    trains on, never the reported return (a fork that means to report a shaped return says so in task_env's
+    """The task as the agent sees it, for training, the sweep and --video alike. Every reported return (training's
+    charts/episodic_return, the sweep's) is the task's own, recorded by tasks.task_env on gym.make's env, below each
+    wrapper added here: reward shaping, a reward scale or a frame stack wraps `env` in `thunk`, and shapes what the
+    agent trains on, never what is reported (a fork that means to report a shaped return says so in task_env's
     `below_record`). With `video_dir`, RecordVideo records there; `render_mode` is gym.make's."""
 
     def thunk():
         # FlattenObservation changes no reward: under the recorder, where the checkpoints' env state has always had it.
-        return tasks.task_env(env_id, video_dir, render_mode, below_record=(gym.wrappers.FlattenObservation,))
+        env = tasks.task_env(env_id, video_dir, render_mode, below_record=(gym.wrappers.FlattenObservation,))
+        return env
 
     return thunk
 

@@ -57,6 +57,7 @@ def vector_mismatch(task: gym.Env, observation_space: gym.Space, action_space: g
     its make_env makes, or None. Infinite bounds on every dimension are ClipAction's (the continuous script puts it
     on each sub-env), which clips to the bounds of the env it wraps: only the shape is compared then."""
     contract = describe(task.observation_space, task.action_space)
-    if isinstance(action_space, gym.spaces.Box) and np.isinf(action_space.low).all() and np.isinf(action_space.high).all():
+    clipped = isinstance(action_space, gym.spaces.Box) and np.isinf([action_space.low, action_space.high]).all()
+    if clipped:
         contract["action"] = {key: value for key, value in contract["action"].items() if key not in ("low", "high")}
     return mismatch(contract, observation_space, action_space)

@@ -62,7 +62,7 @@ def vector_env_error(envs, task: gym.Env) -> str | None:
                 "not a vector wrapper's, so a resumed run would not continue it; wrap each sub-env instead, in "
                 "make_env (the task's own return is recorded there already)")  # fmt: skip
     if not isinstance(envs, gym.vector.SyncVectorEnv):
-        return (f"make_vector_env returns a {name}: a checkpoint holds each sub-env's state so that a run resumes "
+        return (f"make_vector_env returns {name}: a checkpoint holds each sub-env's state so that a run resumes "
                 "exactly, which only gym.vector.SyncVectorEnv (one process) exposes; use SyncVectorEnv")  # fmt: skip
     if (mode := envs.metadata.get("autoreset_mode")) != gym.vector.AutoresetMode.SAME_STEP:
         return (f"make_vector_env's SyncVectorEnv resets a finished sub-env with autoreset mode {mode}; GAE here "
