@@ -136,7 +136,9 @@ def test_a_multidiscrete_task_flattened_in_make_env_trains_and_is_swept(tmp_path
     monkeypatch.syspath_prepend(str(tmp_path / "tasks"))
     fork = write_fork(tmp_path / "fork", "ppo_pgg_discrete.py", FLATTENED_ACTIONS)
     module = scripts.load_module(fork)
-    args = module.Args(**dataclasses.asdict(small_args("discrete", tmp_path / "runs", env_id="fork_grid_task:ForkGrid-v0")))
+    args = module.Args(
+        **dataclasses.asdict(small_args("discrete", tmp_path / "runs", env_id="fork_grid_task:ForkGrid-v0"))
+    )
     runs.launch(args, module.ACTION_SPACE, str(fork), module.train)  # the checks a command line passes, then training
     (ckpt,) = [torch.load(path, weights_only=True) for path in (tmp_path / "runs").glob("*/checkpoints/*1536.pt")]
     assert ckpt["task_spaces"]["action"] == {"type": "Discrete", "n": 6, "start": 0}
