@@ -18,9 +18,10 @@ import pytest
 import torch
 from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, small_args, train
 
+import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import checkpoints, checks, files, identity, progress, rundir, runs, training_state
+from pgg_utils import checkpoints, checks, files, identity, progress, rundir, runs, scripts, training_state
 from pgg_utils.files import lock_directory
 
 
@@ -787,11 +788,6 @@ def test_a_script_that_changes_its_args_while_training_is_one_configuration_and_
     started with, as args.json does, so the sweep sees one configuration; the values the script reached are resume
     state, so a run stopped and resumed ends on the uninterrupted run's bits. Today's main recorded each checkpoint's
     current value (one run, three configurations) and its --resume blamed args.json."""
-    from eval_gamma_sweep import Args as SweepArgs
-    from eval_gamma_sweep import sweep
-
-    from pgg_utils import scripts
-
     source = (ROOT / "ppo_pgg_discrete.py").read_text()
     loop_top = "            if args.anneal_lr:\n"
     assert source.count(loop_top) == 1
@@ -805,8 +801,8 @@ def test_a_script_that_changes_its_args_while_training_is_one_configuration_and_
         ckpt = checkpoint(straight, mark)
         assert rundir.as_json(ckpt["args"]) == started and ckpt["args"]["ent_coef"] == 0.01
         assert ckpt["resume"]["changed_arguments"] == {"ent_coef": 0.01 * 0.5**iteration}
-    sweep(SweepArgs(paths=(str(straight),), output=str(tmp_path / "sweep"), gammas=(1.0,), episodes=1,
-                    script=(str(script),)))  # fmt: skip
+    sweep.sweep(sweep.Args(paths=(str(straight),), output=str(tmp_path / "sweep"), gammas=(1.0,), episodes=1,
+                           script=(str(script),)))  # fmt: skip
     assert len({row["config"] for row in files.read_csv(tmp_path / "sweep" / "summary.csv")}) == 1
 
     stopped = tmp_path / "runs" / "stopped"
