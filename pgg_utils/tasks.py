@@ -69,8 +69,8 @@ def vector_env_error(envs, task: gym.Env) -> str | None:
                 "needs the next episode's first observation in the step that ends one: pass "
                 "autoreset_mode=gym.vector.AutoresetMode.SAME_STEP")  # fmt: skip
     if not all(records_task_return(env) for env in envs.envs):
-        return ("make_vector_env's sub-envs do not report the task's own return (pgg_utils.tasks.task_env, on which "
-                "make_env builds): make each sub-env with make_env")  # fmt: skip
+        return ("make_vector_env's sub-envs do not report the task's own return: make each with make_env, and "
+                "make_env's env with pgg_utils.tasks.task_env, which records it on gym.make's env")  # fmt: skip
     if error := spaces.vector_mismatch(task, envs.single_observation_space, envs.single_action_space):
         return (f"make_vector_env's sub-envs act in another task than make_env makes ({error}): the checkpoints "
                 "record make_env's, which the sweep evaluates; put the wrapper in make_env")  # fmt: skip

@@ -374,8 +374,8 @@ def test_configurations_are_told_apart_by_their_fields_never_by_their_labels_wor
                  for r in episode_rows({cell: [mean]}, run_suffix=activation[-4:])]  # fmt: skip
     write_episodes(tmp_path / "episodes.csv", rows)
     summary = summary_of(tmp_path / "episodes.csv")
-    assert sorted((r["series"], r["mean"]) for r in summary) == [("activation=leaky relu", 190.0),
-                                                                ("activation=leaky tanh", 366.0)]  # fmt: skip
+    assert sorted((r["series"], r["mean"]) for r in summary) == [("activation=leaky relu script=ppo_fork.py", 190.0),
+                                                                ("activation=leaky tanh script=ppo_fork.py", 366.0)]  # fmt: skip
     assert not any(paper.is_paper_configuration(r) for r in summary)
     with pytest.raises(ValueError, match="an argument named script would hide the label's own field"):
         identity.Configuration(
