@@ -50,11 +50,11 @@ config, step and γ: mean over seeds of the per-seed mean return, and its 95% co
 plot_results.py refuses an episodes.csv that is not whole.
 
 Returns and faults. An episode's return is the task's own: the one that gymnasium's RecordEpisodeStatistics,
-which the script's make_env puts directly on the task, records at its end, whatever make_env adds around it
-(a reward scale); for a script whose make_env has none, the sum of make_env's rewards, the figure its
-training logged (records_episodes). A checkpoint is skipped, with one line in skipped.csv and on stderr,
-and the sweep goes on, where its task's spaces are not those it was trained on (pgg_utils.spaces), or where
-during its episodes the task raises, or returns an observation or a reward holding a NaN or an infinity.
+which the script's make_env puts directly on gym.make's env (pgg_utils.tasks.task_env), records at its end,
+whatever make_env adds around it (a reward scale); for a script whose make_env has none, the sum of make_env's
+rewards, the figure its training logged (records_episodes). A checkpoint is skipped, with one line in skipped.csv
+and on stderr, and the sweep goes on, where its task's spaces are not those it was trained on (pgg_utils.spaces),
+or where during its episodes the task raises, or returns an observation or a reward holding a NaN or an infinity.
 
 Changing the episodes. Copy this file and edit `evaluate_cell`, the one episode loop of a cell: an
 observation transform goes where the loop reads `obs`, and a per-episode metric is one more entry of the
@@ -114,6 +114,7 @@ from pgg_utils.identity import Configuration, configuration, configuration_field
 from pgg_utils.pooling import cell_of, check_one_run_per_seed, mean_ci95, seed_means
 from pgg_utils.processes import how_workers_died, start_pool, stop_pool
 from pgg_utils.progress import Progress, format_duration
+from pgg_utils.tasks import TASK_EPISODE
 from pgg_utils.video import labelled, write_video
 
 SUMMARY_COLUMNS = [
@@ -290,8 +291,8 @@ def step_task(env, action, episode: int, gamma: float, t: int):
 
 
 def records_episodes(env) -> bool:
-    """Whether the script's make_env puts gymnasium's RecordEpisodeStatistics on the task: then an
-    episode's return is the one it records at the episode's end (info["episode"]["r"]), the task's own
+    """Whether the script's make_env puts gymnasium's RecordEpisodeStatistics on the task (pgg_utils.tasks.task_env
+    does): then an episode's return is the one recorded at the episode's end (recorded_return), the task's own
     whatever make_env adds around it (a reward scale). A make_env without one (a script written before
     it held one) had its training returns recorded outside it, on make_env's rewards: the sweep sums
     those, which is the same figure training logged."""
@@ -303,10 +304,13 @@ def records_episodes(env) -> bool:
 
 
 def recorded_return(info: dict, episode: int, gamma: float) -> float:
-    if "episode" not in info:
-        raise EpisodeFault(f"episode {episode} at γ = {gamma:g}: make_env's RecordEpisodeStatistics reported no "
-                           "return at the episode's end (info['episode'])")  # fmt: skip
-    return info["episode"]["r"]
+    """The return an episode's last info reports: pgg_utils.tasks.task_env's, recorded below every wrapper of
+    make_env, or, for a make_env from before it, that of its RecordEpisodeStatistics on the task."""
+    for key in (TASK_EPISODE, "episode"):
+        if key in info:
+            return info[key]["r"]
+    raise EpisodeFault(f"episode {episode} at γ = {gamma:g}: make_env's RecordEpisodeStatistics reported no "
+                       f"return at the episode's end (info['{TASK_EPISODE}'])")  # fmt: skip
 
 
 def cell_rows(episodes: int) -> int:

@@ -12,8 +12,9 @@ Configurations are never pooled. A sweep's `config` column names the training co
 variant followed by the training arguments that differ from the defaults, e.g. `ppo mujoco=2.3.7`);
 CSVs without it count as config = variant. A configuration is that label with the exact training
 guidance and dropout of its rows (the label rounds them to 6 digits). Where one env and variant hold
-one configuration, tables and figures show the variant under the paper's name; where they hold
-several, each is its own row or series, labelled by the fields that differ: the sweep's
+one configuration, tables and figures show the variant under the paper's name, with a fork's script
+(`script=`), named wherever it trained; where they hold several, each is its own row or series,
+labelled by the fields that differ (and a fork's script): the sweep's
 `config_fields` column (the label's parts as JSON, never parsed from the label but in CSVs without it). Two
 runs of one configuration with the same seed, or one cell in two CSVs, are an error naming both. An
 env's table (discrete or continuous) is its rows' `action_space`, or where a CSV lacks that column,

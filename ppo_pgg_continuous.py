@@ -35,7 +35,7 @@ import torch
 import tyro
 from torch import nn
 
-from pgg_utils import loading, runs, spaces, training_state
+from pgg_utils import loading, runs, spaces, tasks, training_state
 from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
 from pgg_utils.distributions import Gaussian, guide  # PGG: guide, the mix of the branches' parameters
 from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network
@@ -108,18 +108,15 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
 
 def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None = None):
     """The task as the agent sees it, for training, the sweep and --video alike. Every reported return (training's
-    charts/episodic_return, the sweep's) is RecordEpisodeStatistics' sum of the task's own rewards: reward shaping,
-    a reward scale or a frame stack goes after it, at the end of `thunk`. With `video_dir`, RecordVideo records
-    there; `render_mode` is gym.make's."""
+    charts/episodic_return, the sweep's) is the task's own, recorded by tasks.task_env on gym.make's env, below each
+    wrapper added here: reward shaping, a reward scale or a frame stack wraps `env` in `thunk`, and shapes what the
+    agent trains on, never what is reported (a fork that means to report a shaped return says so in task_env's
+    `below_record`). With `video_dir`, RecordVideo records there; `render_mode` is gym.make's."""
 
     def thunk():
-        render = {"render_mode": "rgb_array"} if video_dir is not None else {"render_mode": render_mode}
-        env = gym.make(env_id, **(render if render["render_mode"] else {}))  # a task may take no render_mode
-        if video_dir is not None:
-            env = gym.wrappers.RecordVideo(env, str(video_dir), disable_logger=True)
-        env = gym.wrappers.FlattenObservation(env)
-        # The task's own returns: a wrapper that changes rewards wraps what this line returns.
-        return gym.wrappers.RecordEpisodeStatistics(env)
+        # FlattenObservation changes no reward: under the recorder, where the checkpoints' env state has always had it.
+        env = tasks.task_env(env_id, video_dir, render_mode, below_record=(gym.wrappers.FlattenObservation,))
+        return env
 
     return thunk
 
@@ -387,13 +384,8 @@ def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout,
             # The statistics count the episode's last observation before the next one's first, as
             # CleanRL's NormalizeObservation does (step, then the reset inside it).
             policy.obs_norm.update(np.stack(infos["final_obs"][infos["_final_obs"]]))
-            ended = infos["final_info"]
-            for i in np.flatnonzero(ended["_episode"]):
-                on_episode(
-                    float(ended["episode"]["r"][i]),
-                    int(ended["episode"]["l"][i]),
-                    global_step + (step + 1) * len(raw_obs),
-                )
+            for episodic_return, episodic_length in tasks.ended_episodes(infos):  # the task's own (tasks.task_env)
+                on_episode(episodic_return, episodic_length, global_step + (step + 1) * len(raw_obs))
         # Normalised on arrival, with statistics that include it, as CleanRL's wrapper returns it.
         next_obs = policy.obs_norm.observe(raw_obs)
     return next_obs, next_done
@@ -576,11 +568,16 @@ def train(args: Args, run: runs.Run) -> None:
     envs = make_vector_env(
         args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
     )
+    task = make_env(args.env_id)()  # as the sweep makes it: the checkpoints record its spaces
+    if error := tasks.vector_env_error(envs, task):
+        refuse(error, envs)
+    shapes = checkpoint_shapes(task)
+    task.close()
     if len(envs.single_action_space.shape) != 1:
         refuse(f"{args.env_id}'s actions have shape {envs.single_action_space.shape}; this script acts with a "
                "vector (a 1-D Box): reshape them in make_env", envs)  # fmt: skip
     obs_dim, action_dim = envs.single_observation_space.shape[0], envs.single_action_space.shape[0]
-    agent = make_agent(asdict(args), checkpoint_shapes(envs))
+    agent = make_agent(asdict(args), shapes)
     # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution, on an
     # agent whose every parameter is drawn at random (a fresh one's zeros and ones would hide a path's difference).
     probe = probe_observations(envs.single_observation_space)
@@ -654,21 +651,22 @@ def train(args: Args, run: runs.Run) -> None:
                 if error := path_error(sys.modules[__name__], agent, args, probe, agent.obs_norm.normalise, noise):
                     raise PathError(f"at step {global_step:,}: {error}")
                 resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
-                run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
+                run.save(marks.popleft(), global_step, agent.state_dict(), shapes, resume)
     finally:
         envs.close()
 
 
-def checkpoint_shapes(envs) -> dict:
-    """What a checkpoint records of the task's spaces: the env's own action bounds, not ClipAction's ±inf;
-    `task_spaces`, the contract whatever evaluates the checkpoint compares with its task (pgg_utils/spaces.py)."""
-    action_space = envs.unwrapped.envs[0].unwrapped.action_space
+def checkpoint_shapes(task: gym.Env) -> dict:
+    """What a checkpoint records of the spaces of `task`, the env make_env makes: its own action bounds (the
+    training envs' ClipAction has ±inf ones); `task_spaces`, the contract whatever evaluates the checkpoint compares
+    with its task (pgg_utils/spaces.py)."""
+    action_space = task.action_space
     return {
-        "obs_dim": int(envs.single_observation_space.shape[0]),
+        "obs_dim": int(task.observation_space.shape[0]),
         "action_dim": int(action_space.shape[0]),
         "action_low": action_space.low.tolist(),
         "action_high": action_space.high.tolist(),
-        "task_spaces": spaces.describe(envs.single_observation_space, action_space),
+        "task_spaces": spaces.describe(task.observation_space, action_space),
     }
 
 

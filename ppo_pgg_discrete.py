@@ -34,7 +34,7 @@ import torch
 import tyro
 from torch import nn
 
-from pgg_utils import loading, runs, spaces, training_state
+from pgg_utils import loading, runs, spaces, tasks, training_state
 from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
 from pgg_utils.distributions import Categorical, guide, gumbel_noise  # PGG: guide, the mix of the branches' logits
 from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network, standard_gumbel
@@ -98,17 +98,14 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
 
 def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None = None):
     """The task as the agent sees it, for training, the sweep and --video alike. Every reported return (training's
-    charts/episodic_return, the sweep's) is RecordEpisodeStatistics' sum of the task's own rewards: reward shaping,
-    a reward scale or a frame stack goes after it, at the end of `thunk`. With `video_dir`, RecordVideo records
-    there; `render_mode` is gym.make's."""
+    charts/episodic_return, the sweep's) is the task's own, recorded by tasks.task_env on gym.make's env, below each
+    wrapper added here: reward shaping, a reward scale or a frame stack wraps `env` in `thunk`, and shapes what the
+    agent trains on, never what is reported (a fork that means to report a shaped return says so in task_env's
+    `below_record`). With `video_dir`, RecordVideo records there; `render_mode` is gym.make's."""
 
     def thunk():
-        render = {"render_mode": "rgb_array"} if video_dir is not None else {"render_mode": render_mode}
-        env = gym.make(env_id, **(render if render["render_mode"] else {}))  # a task may take no render_mode
-        if video_dir is not None:
-            env = gym.wrappers.RecordVideo(env, str(video_dir), disable_logger=True)
-        # The task's own returns: a wrapper that changes rewards wraps what this line returns.
-        return gym.wrappers.RecordEpisodeStatistics(env)
+        env = tasks.task_env(env_id, video_dir, render_mode)
+        return env
 
     return thunk
 
@@ -322,14 +319,8 @@ def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout,
         next_done = np.logical_or(terminations, truncations).astype(np.float32)
         next_obs = obs.astype(np.float32, copy=False)
         rewards_buf[step] = reward
-        if "final_info" in infos:  # a sub-env ended an episode; its last step's info is kept here
-            ended = infos["final_info"]
-            for i in np.flatnonzero(ended["_episode"]):
-                on_episode(
-                    float(ended["episode"]["r"][i]),
-                    int(ended["episode"]["l"][i]),
-                    global_step + (step + 1) * len(next_obs),
-                )
+        for episodic_return, episodic_length in tasks.ended_episodes(infos):  # the task's own (tasks.task_env)
+            on_episode(episodic_return, episodic_length, global_step + (step + 1) * len(next_obs))
     return next_obs, next_done
 
 
@@ -506,11 +497,16 @@ def train(args: Args, run: runs.Run) -> None:
     training_state.seed_everything(args)
 
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
+    task = make_env(args.env_id)()  # as the sweep makes it: the checkpoints record its spaces
+    if error := tasks.vector_env_error(envs, task):
+        refuse(error, envs)
+    shapes = checkpoint_shapes(task)
+    task.close()
     if (start := int(envs.single_action_space.start)) != 0:
         refuse(f"{args.env_id}'s actions start at {start}; this script acts with 0..n-1: shift them in make_env "
                "(gymnasium.wrappers.TransformAction) or start the space at 0", envs)  # fmt: skip
     obs_dim = envs.single_observation_space.shape[0]
-    agent = make_agent(asdict(args), checkpoint_shapes(envs))
+    agent = make_agent(asdict(args), shapes)
     # Before anything is written: the rollouts, `act` and the loss must compute guided_policy's distribution, on an
     # agent whose every parameter is drawn at random (a fresh one's zeros would hide a path's difference).
     probe = probe_observations(envs.single_observation_space)
@@ -583,18 +579,18 @@ def train(args: Args, run: runs.Run) -> None:
                 if error := path_error(sys.modules[__name__], agent, args, probe, as_input, gumbel):
                     raise PathError(f"at step {global_step:,}: {error}")
                 resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
-                run.save(marks.popleft(), global_step, agent.state_dict(), checkpoint_shapes(envs), resume)
+                run.save(marks.popleft(), global_step, agent.state_dict(), shapes, resume)
     finally:
         envs.close()
 
 
-def checkpoint_shapes(envs) -> dict:
-    """What a checkpoint records of the task's spaces; `task_spaces`, the contract whatever evaluates the
-    checkpoint compares with its task (pgg_utils/spaces.py)."""
+def checkpoint_shapes(task: gym.Env) -> dict:
+    """What a checkpoint records of the spaces of `task`, the env make_env makes; `task_spaces`, the contract
+    whatever evaluates the checkpoint compares with its task (pgg_utils/spaces.py)."""
     return {
-        "obs_dim": int(envs.single_observation_space.shape[0]),
-        "n_actions": int(envs.single_action_space.n),
-        "task_spaces": spaces.describe(envs.single_observation_space, envs.single_action_space),
+        "obs_dim": int(task.observation_space.shape[0]),
+        "n_actions": int(task.action_space.n),
+        "task_spaces": spaces.describe(task.observation_space, task.action_space),
     }
 
 

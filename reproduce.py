@@ -43,7 +43,7 @@ import eval_gamma_sweep
 import plot_results
 from paper_study import paper
 from pgg_utils import checkpoints, checks, processes, scripts
-from pgg_utils.arguments import guidance_error
+from pgg_utils.arguments import RUN_ONLY_ARGS, guidance_error
 from pgg_utils.files import (
     RECORD,
     InputError,
@@ -57,7 +57,7 @@ from pgg_utils.files import (
     write_atomic,
     write_manifest,
 )
-from pgg_utils.identity import GOAL_DIMS, Configuration, grid_run_name, variant_id
+from pgg_utils.identity import GOAL_DIMS, VARIANT_ARGS, Configuration, format_arg, grid_run_name, variant_id
 from pgg_utils.progress import Progress
 
 ROOT = Path(__file__).resolve().parent
@@ -80,33 +80,57 @@ NAMING_ENV = next(iter(GOAL_DIMS))
 
 
 @functools.cache
-def variant_name(flags: tuple[str, ...], env_id: str, kind: str) -> str:
-    """The id identity.variant_id gives a run of a variant's flags (paper.VARIANTS, paper.BEYOND_VARIANTS) on
-    `env_id`, the flags parsed by the `kind` training script's own Args as its command line is: the one
-    definition of a variant's name. ValueError (`needs ...`, `has flags ...`) where it cannot run there."""
+def variant_arguments(flags: tuple[str, ...], env_id: str, kind: str) -> dict:
+    """The training arguments of a variant's flags (paper.VARIANTS, paper.BEYOND_VARIANTS) on `env_id`, parsed by
+    the `kind` training script's own Args as its command line is. ValueError (`needs ...`, `has flags ...`) where
+    it cannot run there."""
     module = scripts.original(kind)
     try:
         args = tyro.cli(module.Args, args=["--env-id", env_id, *paper.variant_flags(flags, env_id)],
                         console_outputs=False)  # fmt: skip
     except SystemExit:
         raise ValueError(f"has flags that {Path(module.__file__).name} refuses: {' '.join(flags)}") from None
-    return variant_id(asdict(args))
+    return asdict(args)
+
+
+def variant_name(flags: tuple[str, ...], env_id: str, kind: str) -> str:
+    """The id identity.variant_id gives a run of a variant's flags on `env_id` (variant_arguments): the one
+    definition of a variant's name."""
+    return variant_id(variant_arguments(flags, env_id, kind))
+
+
+def unnamed_arguments(flags: tuple[str, ...]) -> dict:
+    """The training arguments a variant's flags set away from the continuous script's defaults, on NAMING_ENV,
+    besides those its variant id names (`{"learning_rate": 0.001}`)."""
+    args, defaults = variant_arguments(flags, NAMING_ENV, "continuous"), variant_arguments((), NAMING_ENV, "continuous")
+    unnamed = args.keys() - VARIANT_ARGS - RUN_ONLY_ARGS - {"env_id", "seed"}
+    return {key: args[key] for key in sorted(unnamed) if args[key] != defaults[key]}
 
 
 @functools.cache
 def grid_variants() -> dict[str, tuple[str, ...]]:
     """{id: training flags} of the variants the grid can run: the paper's in its order, then those beyond it,
-    each named by variant_name on NAMING_ENV with the continuous script, which takes every variant's flags."""
+    each named by variant_name on NAMING_ENV with the continuous script, which takes every variant's flags. A
+    variant whose runs would get the id of an earlier one, from which it differs in an argument the id does not
+    name, has that id followed by the other arguments its flags set (`pgg_g1.1_learning_rate0.001`). ValueError
+    (one line) for two variants that train the same runs."""
     named = {}
     for flags in (*paper.VARIANTS, *paper.BEYOND_VARIANTS):
         name = variant_name(flags, NAMING_ENV, "continuous")
         if name in named:
-            raise ValueError(f"paper.py's variants {' '.join(named[name])} and {' '.join(flags)} are both {name}")
+            name += "".join(f"_{key}{format_arg(value)}" for key, value in unnamed_arguments(flags).items())
+        if name in named:
+            raise ValueError(f"paper.py's variants {' '.join(named[name])} and {' '.join(flags)} train the same "
+                             f"runs ({name}): remove one")  # fmt: skip
         named[name] = flags
     return named
 
 
-VARIANT_IDS = tuple(grid_variants())
+try:
+    VARIANT_IDS = tuple(grid_variants())
+except ValueError as e:  # paper.py's variants, as edited: every command would stop here
+    print(f"error: {e}", file=sys.stderr)
+    sys.exit(2)
 PAPER_VARIANT_IDS = VARIANT_IDS[: len(paper.VARIANTS)]
 PRESETS = {
     "quick": Preset(("CartPole-v1",), 2, PAPER_VARIANT_IDS, 50_000, 25_000, (1.0, 2.0, 5.0), 20),
@@ -203,7 +227,7 @@ def argument_error(args: Args) -> str | None:
                 name = variant_name(grid_variants()[variant], env_id, kind)
             except ValueError as e:
                 return f"--variants: {variant} {e}"
-            if name != variant:  # its runs would be named for another variant
+            if name != variant_name(grid_variants()[variant], NAMING_ENV, "continuous"):  # named for another
                 return f"--variants: {variant}'s flags give its runs on {env_id} the variant id {name}"
         defaults = scripts.original(kind).Args()
         batch = defaults.num_envs * defaults.num_steps

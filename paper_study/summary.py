@@ -62,21 +62,23 @@ def check_one_kind(rows: list[dict]) -> None:
 
 def config_labels(configs: dict) -> dict:
     """{(env, variant, config, guidance, dropout): (its label's fields, its source set)} -> the label that
-    tells configurations of one env and variant apart: "" where the env and variant have one, else the
-    fields whose values differ (`key=default` where a config does not set one; guidance and dropout
-    exactly), with the source folder added where that is still ambiguous."""
+    tells configurations of one env and variant apart: the fields whose values differ (`key=default` where a
+    config does not set one; guidance and dropout exactly), with the source folder added where that is still
+    ambiguous; none where the env and variant have one configuration. A fork's script (`script`) is named wherever
+    it trained, alone or beside others: its numbers are never the original's."""
     groups = defaultdict(dict)
     for (env, variant, *config), entry in configs.items():
         groups[(env, variant)][tuple(config)] = entry
     labels = {}
     for (env, variant), found in groups.items():
-        if len(found) == 1:
-            labels.update({(env, variant, *c): "" for c in found})
-            continue
         tokens = {c: fields | {"guidance": repr(c[1]), "cond_dropout": repr(c[2])} for c, (fields, _) in found.items()}
         keys = sorted({k for t in tokens.values() for k in t})
         differing = [k for k in keys if len({t.get(k) for t in tokens.values()}) > 1]
-        named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in differing) for c in found}
+        named = {c: " ".join(f"{k}={tokens[c].get(k, 'default')}" for k in keys if k in differing
+                             or (k == "script" and k in tokens[c])) for c in found}  # fmt: skip
+        if len(found) == 1:
+            labels.update({(env, variant, *c): named[c] for c in found})
+            continue
         for c, (_, sources) in found.items():
             if not named[c] or list(named.values()).count(named[c]) > 1:
                 folders = sorted({Path(s).parent.name or s for s in sources})

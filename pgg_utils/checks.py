@@ -2,6 +2,7 @@
 script can train its env here (action space, observations, rendering)."""
 
 import importlib.util
+import inspect
 import os
 import shutil
 import tempfile
@@ -44,10 +45,10 @@ def make_hint(env_id: str, error: Exception) -> str:
     return "".join(f"; {hint}" for hint in hints)
 
 
-def argument_error(args, kind: str, script: str | Path | None = None) -> str | None:
+def argument_error(args, kind: str, script: str | Path | None = None, make_env=None) -> str | None:
     """A one-line description of what is wrong with the `args` of training script `script` (None: the
     repository's own for `kind`, discrete or continuous, the action space it trains), or None. Makes the
-    env once; touches no file."""
+    env once, with the script's `make_env` (None: gym.make); touches no file."""
     for name, (holds, requirement) in ARGUMENT_RULES.items():
         if hasattr(args, name) and not holds(getattr(args, name)):
             return f"--{name.replace('_', '-')} must be {requirement}, got {getattr(args, name)!r}"
@@ -74,13 +75,22 @@ def argument_error(args, kind: str, script: str | Path | None = None) -> str | N
         return "--compile needs a C++ compiler (g++ or clang++ on PATH, or $CXX)"
     if args.track and importlib.util.find_spec("wandb") is None:
         return "--track needs Weights and Biases: pip install wandb"
-    return env_error(args.env_id, kind, args.capture_video, getattr(args, "null_dims", None))
+    return env_error(args.env_id, kind, args.capture_video, getattr(args, "null_dims", None), make_env)
 
 
-def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=None) -> str | None:
-    """Why a training script of `kind` cannot train `env_id` here (with the null embedding on `null_dims`), or None."""
+def made_env(env_id: str, make_env=None, render_mode: str | None = None) -> gym.Env:
+    """The env of `env_id` as a training script's `make_env` makes it (None: gym.make's), rendering with
+    `render_mode`; a make_env that takes no render_mode (written before it did) renders gym.make's env."""
+    if make_env is None or (render_mode and "render_mode" not in inspect.signature(make_env).parameters):
+        return gym.make(env_id, render_mode=render_mode)
+    return make_env(env_id, render_mode=render_mode)() if render_mode else make_env(env_id)()
+
+
+def env_error(env_id: str, kind: str, capture_video: bool = False, null_dims=None, make_env=None) -> str | None:
+    """Why a training script of `kind` cannot train `env_id` here (with the null embedding on `null_dims`), or None:
+    the env as its `make_env` makes it (None: gym.make's), whose spaces the agent acts in."""
     try:
-        env = gym.make(env_id, render_mode="rgb_array" if capture_video else None)
+        env = made_env(env_id, make_env, "rgb_array" if capture_video else None)
     except ImportError as e:
         if env_id == "Pusher-v4":
             return "Pusher-v4 needs mujoco<3 (pip install mujoco==2.3.7, Python <= 3.11); with a newer mujoco use Pusher-v5"

@@ -63,6 +63,9 @@ class Run:
         self.dir = Path(args.output_dir) / (args.run_name or self.config.run_name)
         # --exp-name's default (Configuration.experiment), resolved once for every record and for W&B
         self.args = replace(args, exp_name=self.config.experiment)
+        # The arguments the run starts with, its configuration, as args.json and every checkpoint record them: a
+        # script that changes its args while training (an entropy schedule) keeps the changes in the resume state.
+        self.arguments = self.recorded_arguments()
         self.lock = None
         self.resume_from: Path | None = None
         self.finished = False
@@ -129,11 +132,11 @@ class Run:
         for folder in sorted({path.parent for path in earlier}, key=lambda f: -len(f.parts)):
             if folder != self.dir and not any(folder.iterdir()):  # emptied of what the scripts wrote
                 folder.rmdir()
-        write_atomic(self.dir / "args.json", json.dumps(self.recorded_arguments(), indent=2))
+        write_atomic(self.dir / "args.json", json.dumps(self.arguments, indent=2))
 
     def recorded_arguments(self) -> dict:
-        """The arguments as args.json and the checkpoints record them: --output-dir relative to the run
-        directory, so that no record holds a folder of the machine that trained it."""
+        """The arguments as they are now, as args.json and the checkpoints record them: --output-dir relative to the
+        run directory, so that no record holds a folder of the machine that trained it."""
         return {**asdict(self.args), "output_dir": os.path.relpath(self.args.output_dir, self.dir)}
 
     def check_restartable(self, earlier: list[Path]) -> None:
@@ -206,7 +209,7 @@ class Run:
         """The training arguments in which `recorded` (a checkpoint's or args.json's) differ from this run's
         (Configuration.differing)."""
         theirs = Configuration(self.kind, self.config.script, as_json(recorded))
-        ours = Configuration(self.kind, self.config.script, as_json(self.recorded_arguments()))
+        ours = Configuration(self.kind, self.config.script, as_json(self.arguments))
         return theirs.differing(ours, as_json(asdict(type(self.args)())))
 
     def close(self) -> None:
@@ -266,6 +269,8 @@ class Run:
         RNGs restored. The observation is None for a task whose own state a checkpoint cannot hold:
         the caller starts fresh episodes, a statistically equal run."""
         state = resumed["resume"]
+        for name, value in state.get("changed_arguments", {}).items():  # as the script had changed them (save)
+            setattr(self.args, name, value)
         restore_env_state(envs, state["envs"])
         next_obs = next_done = None
         if all(sub_env["complete"] for sub_env in state["envs"]):
@@ -301,7 +306,12 @@ class Run:
 
     def save(self, mark: int, global_step: int, model: dict, shapes: dict, resume: dict) -> None:
         """Writes the checkpoint of `mark`: self-contained, pickle-free (proven by loading it back) and
-        atomic. `shapes`: the script's own fields (its action space and sizes)."""
+        atomic. `shapes`: the script's own fields (its action space and sizes). It records the arguments the run
+        started with; those the script has changed since are resume state (`changed_arguments`), restored by a
+        resume, so that one run is one configuration and continues as it would have."""
+        changed = {name: value for name, value in self.recorded_arguments().items() if value != self.arguments[name]}
+        if changed:
+            resume = {**resume, "changed_arguments": changed}
         payload = {
             "format_version": CHECKPOINT_FORMAT_VERSION,
             "script": self.script.stem,
@@ -312,7 +322,7 @@ class Run:
             "global_step": int(global_step),
             "step_mark": int(mark),
             "run": self.dir.name,
-            "args": self.recorded_arguments(),
+            "args": self.arguments,
             "versions": package_versions(),
             "machine": self.machine,
             "code": self.code,
@@ -369,9 +379,11 @@ def launch(args, kind: str, script: str, train) -> None:
     """A training script's `main` after parsing: checks every argument before the disk is touched,
     prepares the run directory, and calls `train(args, run)`. Every failure is one line on stderr:
     files.exit_status's rule: exit 2 for bad arguments or a run directory that must not be used or
-    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts), a non-finite run or a
-    task that raises in its step or reset (task_failure; the earlier checkpoints kept, and named)."""
-    error, status = argument_error(args, kind), 2
+    cannot be written, 130 for Ctrl-C, 1 for a full disk (also when the run starts), a non-finite run, a
+    task that raises in its step or reset (task_failure) or a path that disagrees with the definition (PathError;
+    the earlier checkpoints kept, and named)."""
+    make_env = getattr(sys.modules.get(train.__module__), "make_env", None)  # the script's: its task as it trains
+    error, status = argument_error(args, kind, make_env=make_env), 2
     run = None
     if error is None:
         try:

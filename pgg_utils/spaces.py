@@ -1,4 +1,5 @@
-"""A checkpoint's contract with its task: the observation and action spaces it was trained on.
+"""A checkpoint's contract with its task: the observation and action spaces it was trained on, those of the env its
+script's `make_env` makes.
 
 Training records `describe(...)` in every checkpoint (key `task_spaces`); whatever evaluates the checkpoint
 compares it with the task it is handed (`mismatch`), so a task whose spaces changed since training is named in
@@ -49,3 +50,14 @@ def mismatch(contract: dict, observation_space: gym.Space, action_space: gym.Spa
         if field in then_act and list(np.atleast_1d(then_act[field])) != list(np.atleast_1d(now["action"][field])):
             return f"action {field} {then_act[field]} in training, {now['action'][field]} now"
     return None
+
+
+def vector_mismatch(task: gym.Env, observation_space: gym.Space, action_space: gym.Space) -> str | None:
+    """One line naming how the single spaces of a training script's vector env differ from those of `task`, the env
+    its make_env makes, or None. Infinite bounds on every dimension are ClipAction's (the continuous script puts it
+    on each sub-env), which clips to the bounds of the env it wraps: only the shape is compared then."""
+    contract = describe(task.observation_space, task.action_space)
+    clipped = isinstance(action_space, gym.spaces.Box) and np.isinf([action_space.low, action_space.high]).all()
+    if clipped:
+        contract["action"] = {key: value for key, value in contract["action"].items() if key not in ("low", "high")}
+    return mismatch(contract, observation_space, action_space)

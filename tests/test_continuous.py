@@ -14,6 +14,7 @@ import ppo_pgg_continuous as pgg
 from paper_study.paper import PAPER_ENVS
 from pgg_utils import checkpoints, checks
 from pgg_utils.guidance import uses_null_branch
+from pgg_utils.tasks import TASK_EPISODE
 
 PAPER_TASKS = PAPER_ENVS["continuous"]
 
@@ -167,7 +168,7 @@ def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
     included, in the same order. Hopper with a 25-step time limit ends episodes both ways."""
     short = lambda env_id, video_dir=None: (
         lambda: gym.wrappers.RecordEpisodeStatistics(
-            gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25))
+            gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=25)), stats_key=TASK_EPISODE
         )
     )
     monkeypatch.setattr(pgg, "make_env", short)

@@ -11,6 +11,7 @@ from torch.distributions import Categorical
 import ppo_pgg_discrete as pgg
 from pgg_utils import checkpoints
 from pgg_utils.guidance import uses_null_branch
+from pgg_utils.tasks import TASK_EPISODE
 
 
 def tiny_args(tmp_path, **overrides) -> pgg.Args:
@@ -188,7 +189,7 @@ class CountdownEnv(gym.Env):
 
 def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     lengths = [3, 5]
-    countdown = lambda: gym.wrappers.RecordEpisodeStatistics(CountdownEnv(lengths.pop(0)))  # as make_env records
+    countdown = lambda: gym.wrappers.RecordEpisodeStatistics(CountdownEnv(lengths.pop(0)), stats_key=TASK_EPISODE)
     monkeypatch.setattr(pgg, "make_env", lambda env_id, video_dir=None: countdown)
     envs = pgg.make_vector_env("unused", 2, seed=0)
     obs, _ = envs.reset(seed=0)

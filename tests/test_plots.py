@@ -374,8 +374,8 @@ def test_configurations_are_told_apart_by_their_fields_never_by_their_labels_wor
                  for r in episode_rows({cell: [mean]}, run_suffix=activation[-4:])]  # fmt: skip
     write_episodes(tmp_path / "episodes.csv", rows)
     summary = summary_of(tmp_path / "episodes.csv")
-    assert sorted((r["series"], r["mean"]) for r in summary) == [("activation=leaky relu", 190.0),
-                                                                ("activation=leaky tanh", 366.0)]  # fmt: skip
+    assert sorted((r["series"], r["mean"]) for r in summary) == [("activation=leaky relu script=ppo_fork.py", 190.0),
+                                                                ("activation=leaky tanh script=ppo_fork.py", 366.0)]  # fmt: skip
     assert not any(paper.is_paper_configuration(r) for r in summary)
     with pytest.raises(ValueError, match="an argument named script would hide the label's own field"):
         identity.Configuration(
@@ -1231,3 +1231,25 @@ def test_long_panel_titles_are_broken_rather_than_overlap(tmp_path):
     short = figures.figure_for_variant(summary_of(tmp_path / "a.csv"), ["HalfCheetah-v4"], "ppo")
     figures.render(short)
     assert short.axes[0].get_title() == "HalfCheetah-v4 (3 seeds, MuJoCo 3.1.6)"
+
+
+def test_a_forks_runs_are_named_by_their_script_in_every_output_whatever_else_the_sweep_holds(tmp_path):
+    """A sweep of a fork's runs alone: every table row, best_gamma and aggregate_iqm names the fork's script, as they
+    do beside the original's runs (today's main labelled them "pgg_g1.1" and "PPO", the original's names); and two
+    configurations of one fork, told apart by an argument, both name it too."""
+    write_episodes(tmp_path / "sweep" / "episodes.csv", episode_rows(SEED_MEANS, config="script=ppo_fork.py"))
+    generate(tmp_path / "sweep", tmp_path)
+    out = tmp_path / "out"
+    methods = [line.split(" | ")[0] for line in (out / "table_discrete.md").read_text().splitlines()
+               if line.startswith("| ") and not line.startswith(("| Method", "| **", "|   γ"))]  # fmt: skip
+    assert methods == ["| PPO [script=ppo_fork.py]", "| pgg_g1.1 [script=ppo_fork.py]"] * 2
+    for table in ("best_gamma.csv", "aggregate_iqm.csv"):
+        assert {row["variant"] for row in read_csv(out / table)} == {"ppo [script=ppo_fork.py]",
+                                                                    "pgg_g1.1 [script=ppo_fork.py]"}  # fmt: skip
+    from paper_study.summary import config_labels
+
+    two = {("CartPole-v1", "ppo", f"ppo script=ppo_fork.py learning_rate={rate}", 1.0, 0.0):
+           ({"script": "ppo_fork.py", "learning_rate": rate}, {"sweep/episodes.csv"}) for rate in ("0.001", "0.002")}  # fmt: skip
+    assert sorted(config_labels(two).values()) == [
+        f"learning_rate={rate} script=ppo_fork.py" for rate in ("0.001", "0.002")
+    ]

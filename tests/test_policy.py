@@ -299,9 +299,8 @@ def events(run_dir, tag: str) -> list[float]:
 
 
 def test_a_reward_scale_in_make_env_leaves_the_logged_returns_raw_and_the_checkpoint_records_the_spaces(tmp_path):
-    scaled = ("        return gym.wrappers.RecordEpisodeStatistics(env)\n",
-              ("        env = gym.wrappers.RecordEpisodeStatistics(env)\n"
-              "        return gym.wrappers.TransformReward(env, lambda reward: 0.1 * reward)\n"))  # fmt: skip
+    scaled = ("        return env\n",
+              "        return gym.wrappers.TransformReward(env, lambda reward: 0.1 * reward)\n")  # fmt: skip
     module = scripts.load_module(write_fork(tmp_path / "fork", "ppo_pgg_discrete.py", scaled))
     env = module.make_env("CartPole-v1")()
     env.reset(seed=0)

@@ -7,7 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, one_line_error
 
 import reproduce
 from paper_study import beyond_report, paper
@@ -432,3 +432,35 @@ def test_a_variant_that_its_flags_name_otherwise_on_a_task_is_refused_there(monk
         )
     finally:
         reproduce.grid_variants.cache_clear()  # named again from paper.py's own variants
+
+
+def test_a_grid_variant_that_differs_from_another_by_any_flag_gets_an_id_of_its_own(tmp_path):
+    """A variant that its variant id alone would confuse with the paper's PGG (it adds --learning-rate) is named by
+    the id and the argument its flags set otherwise, and the grid launches it so; a variant that trains the same runs
+    as another is one line of error, exit 2. Today's main stopped every reproduce.py command at import with a
+    ValueError traceback ("... are both pgg_g1.1")."""
+    added = "paper.BEYOND_VARIANTS += (('--guidance', '1.1', '--learning-rate', '0.001'),)\n"
+    code = (
+        "import tyro\n"
+        "from paper_study import paper\n"
+        f"{added}"
+        "import reproduce\n"
+        "args = tyro.cli(reproduce.Args, args=['--envs', 'CartPole-v1', '--seeds', '1', '--variants', "
+        "'pgg_g1.1_learning_rate0.001', 'pgg_g1.1', '--root', 'runs'])\n"
+        "assert reproduce.argument_error(args) is None, reproduce.argument_error(args)\n"
+        "print('\\n'.join(' '.join(spec.command()[2:]) for spec in reproduce.grid(args)))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    flags_of_run = {"CartPole-v1__pgg_g1.1_learning_rate0.001__s1": "--guidance 1.1 --learning-rate 0.001",
+                    "CartPole-v1__pgg_g1.1__s1": "--guidance 1.1 --cond-dropout 0.0"}  # fmt: skip
+    assert done.stdout.splitlines() == [
+        f"--env-id CartPole-v1 --seed 1 {flags} --output-dir runs --run-name {name} --torch-threads 1 "
+        "--total-timesteps 50000 --checkpoint-interval 25000"
+        for name, flags in flags_of_run.items()
+    ]
+    same = "paper.BEYOND_VARIANTS += (('--guidance', '1.1', '--cond-dropout', '0'),)\n"
+    done = subprocess.run([sys.executable, "-c", f"from paper_study import paper\n{same}import reproduce\n"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)  # fmt: skip
+    assert one_line_error(done) == ("error: paper.py's variants --guidance 1.1 --cond-dropout 0.0 and --guidance 1.1 "
+                                    "--cond-dropout 0 train the same runs (pgg_g1.1): remove one")  # fmt: skip

@@ -1,6 +1,7 @@
 """Run directories and checkpoints of both training scripts: resume, refusal to overwrite, the lock,
 one-line errors, Ctrl-C, progress, videos, and the PPO statistics under conditioning dropout."""
 
+import json
 import os
 import pty
 import shutil
@@ -17,9 +18,10 @@ import pytest
 import torch
 from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, small_args, train
 
+import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import checkpoints, checks, files, identity, progress, rundir, runs, training_state
+from pgg_utils import checkpoints, checks, files, identity, progress, rundir, runs, scripts, training_state
 from pgg_utils.files import lock_directory
 
 
@@ -773,3 +775,42 @@ def test_the_project_modules_import_one_another_in_no_circle():
         return any(d == target or (d not in seen and reaches(d, target, seen | {d})) for d in graph.get(start, ()))
 
     assert [module for module in graph if reaches(module, module, {module})] == []
+
+
+# --- a script that changes its args while training ------------------------------------------------
+
+# CleanRL's habit for a schedule: the argument itself rewritten in the training loop, here halved every iteration.
+ENTROPY_SCHEDULE = "            args.ent_coef *= 0.5  # an entropy schedule\n"
+
+
+def test_a_script_that_changes_its_args_while_training_is_one_configuration_and_resumes_exactly(tmp_path):
+    """An entropy schedule written `args.ent_coef *= 0.5` in the loop: every checkpoint records the arguments the run
+    started with, as args.json does, so the sweep sees one configuration; the values the script reached are resume
+    state, so a run stopped and resumed ends on the uninterrupted run's bits. Today's main recorded each checkpoint's
+    current value (one run, three configurations) and its --resume blamed args.json."""
+    source = (ROOT / "ppo_pgg_discrete.py").read_text()
+    loop_top = "            if args.anneal_lr:\n"
+    assert source.count(loop_top) == 1
+    script = tmp_path / "ppo_entropy_schedule.py"
+    script.write_text(source.replace(loop_top, ENTROPY_SCHEDULE + loop_top))
+    module = scripts.load_module(script)
+    args = module.Args(**vars(small_args("discrete", tmp_path / "runs", run_name="straight")))
+    straight = runs.train_in_process(module, args)
+    started = json.loads((straight / "args.json").read_text())
+    for mark, iteration in ((512, 2), (1024, 4), (1536, 6)):
+        ckpt = checkpoint(straight, mark)
+        assert rundir.as_json(ckpt["args"]) == started and ckpt["args"]["ent_coef"] == 0.01
+        assert ckpt["resume"]["changed_arguments"] == {"ent_coef": 0.01 * 0.5**iteration}
+    sweep.sweep(sweep.Args(paths=(str(straight),), output=str(tmp_path / "sweep"), gammas=(1.0,), episodes=1,
+                           script=(str(script),)))  # fmt: skip
+    assert len({row["config"] for row in files.read_csv(tmp_path / "sweep" / "summary.csv")}) == 1
+
+    stopped = tmp_path / "runs" / "stopped"
+    (stopped / "checkpoints").mkdir(parents=True)
+    shutil.copy(straight / "args.json", stopped / "args.json")
+    for mark in (512, 1024):
+        shutil.copy(checkpoints.checkpoint_path(straight, mark), checkpoints.checkpoint_path(stopped, mark))
+    runs.train_in_process(module, replace(args, run_name="stopped", resume=True))
+    resumed, uninterrupted = checkpoint(stopped, 1536), checkpoint(straight, 1536)
+    assert all(torch.equal(resumed["model"][k], uninterrupted["model"][k]) for k in uninterrupted["model"])
+    assert resumed["resume"]["changed_arguments"] == uninterrupted["resume"]["changed_arguments"]
