@@ -610,8 +610,9 @@ class Task:
 def evaluation_code(script: Path, task_files) -> str:
     """The digest of the code that runs in a cell's episodes: the file of this sweep (or of a copy of it,
     whichever runs), the script that evaluates the checkpoint, a custom task's module (scripts.task_sources;
-    gymnasium's own tasks are named by its version in the stack), and every project module that these
-    import (cells.imported_files). An edit to any of them, or another copy of the sweep, re-evaluates the cells."""
+    gymnasium's own tasks are named by its version in the stack), and every module that these import, wherever
+    it lies, but installed packages and the standard library, which the stack's versions name (cells.imported_files).
+    An edit to any of them, or another copy of the sweep, re-evaluates the cells."""
     return code_digest(imported_files([Path(__file__), script, *task_files]))
 
 
