@@ -40,8 +40,10 @@ Outputs (in --output, locked against a second sweep while this one runs): cells/
 finished (checkpoint, γ) cell, written atomically and named by the bytes of the checkpoint that were
 evaluated, the γ, the settings, the evaluation stack (the mujoco, gymnasium, numpy and torch versions,
 recorded in every row) and every file of code that runs in its episodes: this sweep's file (or a copy
-of it), the script that evaluates the checkpoint, a custom task's module, and each project module these
-import, read from their import statements (evaluation_code). A rerun reuses a cell only if it is whole
+of it), the script that evaluates the checkpoint, a custom task's module, and each module these import,
+read from their import statements, wherever it lies on the path (a fork's or a task's helper module, a
+package's other modules), but for installed packages and the standard library, which the stack's versions
+stand for (evaluation_code, cells.imported_files). A rerun reuses a cell only if it is whole
 and every row's checksum holds, so an interrupted sweep (Ctrl-C: exit status 130) loses only the cells
 in flight, a damaged cell is evaluated again, and so is every cell after an edit to any of that code.
 Then episodes.csv (every episode of the requested cells, sorted), summary.csv (per env, variant,
@@ -61,7 +63,8 @@ observation transform goes where the loop reads `obs`, and a per-episode metric 
 dict it returns, one value per episode, written after the sweep's columns in every cell and in
 episodes.csv (a name of the sweep's own columns, or not one value per episode, is refused in one line).
 The copy's cells are its own: its file is part of every cell's identity, so the original's cells are
-never reused by it, nor its cells by the original, even in one --output.
+never reused by it, nor its cells by the original, even in one --output. Every episode is played by that
+loop: the copy's --video films its cell's episode, with its return.
 """
 
 from pgg_utils import startup  # first: a Ctrl-C during the imports below is one line, status 130
@@ -148,11 +151,11 @@ class Args:
     bootstrap_samples: int = 10_000
     """resamples for --ci bootstrap"""
     video: str | None = None
-    """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder: gamma_<γ>.mp4 and side_by_side.mp4, all from the same episode seed (needs the [video] extra); None: sweep"""
+    """instead of sweeping, record one episode of ONE checkpoint at each γ into this folder: gamma_<γ>.mp4 and side_by_side.mp4, each the sweep's cell episode --video-episode, played in its cell of --episodes episodes (needs the [video] extra); None: sweep"""
     script: tuple[str, ...] = ()
     """training scripts to evaluate with besides the repository's: a checkpoint is evaluated by the one of its training script's file name (a fork kept outside the repository, or a copy of a script); () : the repository's only"""
     video_episode: int = 0
-    """with --video: the episode to record, k (reset seed eval_seed + k and the action noise of a sweep cell's episode k)"""
+    """with --video: the episode to record, k < --episodes: the sweep's cell episode k (its reset seed eval_seed + k, its noise, its return)"""
 
 
 # --- checkpoints ----------------------------------------------------------------------------------
@@ -208,6 +211,10 @@ class GuidedPolicy:
         """Actions for a batch, one guidance strength per row; `noise` holds one row of episode_noise
         per observation, used unless deterministic."""
         return self.agent.act(raw_obs, guidance, deterministic, noise, **self.null)
+
+    def noise(self, eval_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
+        """The action noise of episode `episode` of a cell (episode_noise)."""
+        return episode_noise(self.kind, eval_seed, episode, horizon, action_size)
 
     def make_env(self, render_mode: str | None = None):
         """An evaluation env of the checkpoint's task, made by the `make_env` of the script that evaluates
@@ -267,10 +274,11 @@ def first_line(error: BaseException) -> str:
     return f"{type(error).__name__}: {str(error).splitlines()[0]}" if str(error) else type(error).__name__
 
 
-def reset_task(env, seed: int, episode: int, gamma: float):
-    """env.reset(seed=seed)'s observation; EpisodeFault where the task raises or returns a NaN or an infinity."""
+def reset_task(env, seed: int, episode: int, gamma: float, options: dict | None = None):
+    """env.reset(seed=seed, options=options)'s observation; EpisodeFault where the task raises or returns a NaN
+    or an infinity."""
     try:
-        obs, _ = env.reset(seed=seed)
+        obs, _ = env.reset(seed=seed, options=options)
     except Exception as e:
         raise EpisodeFault(
             f"episode {episode} at γ = {gamma:g}: the task raised {first_line(e)} at its reset"
@@ -318,23 +326,48 @@ def cell_rows(episodes: int) -> int:
     return max(episodes, MIN_FORWARD_ROWS)
 
 
-def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_seed: int, deterministic: bool):
+class EpisodeHooks:
+    """What a caller adds to the episodes of a cell (evaluate_cell), each a no-op here: the env of an episode
+    (--video films one), its reset options (a command), and a look at each step (a metric, a frame, the
+    actions to clone). Hooks watch the episodes; the cell's numbers are the same with or without them."""
+
+    def make_env(self, policy, episode: int):
+        return policy.make_env()
+
+    def reset_options(self, episode: int) -> dict | None:
+        return None
+
+    def after_reset(self, obs: np.ndarray) -> None:
+        """The cell's first observations, one row per episode."""
+
+    def after_step(self, episode: int, t: int, obs: np.ndarray, reward: float, done: bool, info: dict) -> None:
+        """Episode `episode` took its step t (from 0): what the task returned, `done` where the episode ended."""
+
+
+NO_HOOKS = EpisodeHooks()
+
+
+def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_seed: int, deterministic: bool,
+                  hooks: EpisodeHooks = NO_HOOKS):  # fmt: skip
     """One (checkpoint, γ) cell: its episodes step together, one row each, in a batch of their own.
     Returns its per-episode columns, {"return": ..., "length": ...}, each of shape (episodes,) (a copy
     of the sweep adds its own here: the module docstring's "Changing the episodes"). EpisodeFault
     where the task raises or returns a NaN or an infinity.
 
-    An episode that ends keeps its row (holding its last observation) until the whole cell is done,
-    so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the first
-    step to the last: what a cell computes is a function of the checkpoint, γ and the settings alone
+    The one loop that plays evaluation episodes: the sweep's cells, --video, and, through `hooks`,
+    paper_study/goal_distance.py, paper_study/command_tracking.py and pgg_utils/bc_null.py (which acts with
+    a policy of its own). An episode that ends keeps its row (holding its last observation) until the whole
+    cell is done, so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the
+    first step to the last: what a cell computes is a function of the checkpoint, γ and the settings alone
     (the module docstring's Exactness)."""
-    envs = [policy.make_env() for _ in range(episodes)]
+    envs = [hooks.make_env(policy, k) for k in range(episodes)]
     try:
         horizon, action_size = horizon_and_action_size(envs[0], ckpt)
         # (horizon, episodes, action_size): the noise of time step t is one contiguous block.
-        noise = np.stack([episode_noise(policy.kind, eval_seed, k, horizon, action_size) for k in range(episodes)], 1)
+        noise = np.stack([policy.noise(eval_seed, k, horizon, action_size) for k in range(episodes)], 1)
         guidance = np.full(episodes, float(gamma))
-        obs = np.stack([reset_task(env, eval_seed + k, k, gamma) for k, env in enumerate(envs)])
+        obs = np.stack([reset_task(env, eval_seed + k, k, gamma, hooks.reset_options(k)) for k, env in enumerate(envs)])
+        hooks.after_reset(obs)
         policy.reset()
         recorded = records_episodes(envs[0])
         returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
@@ -351,6 +384,7 @@ def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_
                     running[i] = False
                     if recorded:
                         returns[i] = recorded_return(info, i, gamma)
+                hooks.after_step(i, t, obs[i], reward, not running[i], info)
             if not np.isfinite(obs).all():
                 episode = int(np.flatnonzero(~np.isfinite(obs).reshape(episodes, -1).all(1))[0])
                 raise EpisodeFault(f"episode {episode} at γ = {gamma:g}: the task returned a non-finite observation "
@@ -372,36 +406,12 @@ def evaluate_batched(policy: GuidedPolicy, ckpt, gammas, episodes, eval_seed, de
 
 
 def evaluate_sequential(policy: GuidedPolicy, ckpt, gamma, episodes, eval_seed, deterministic):
-    """Reference: one environment, one episode after another, one observation per forward.
-    Same seeds and noise as evaluate_cell; used by the tests and the benchmark. It agrees with the
-    cells to rounding, not necessarily to the bit (see the module docstring)."""
-    env = policy.make_env()
-    episodes_played = [play_episode(env, policy, ckpt, gamma, eval_seed, k, deterministic) for k in range(episodes)]
-    returns, lengths = zip(*episodes_played)
-    env.close()
-    return np.array(returns), np.array(lengths)
-
-
-def play_episode(env, policy: GuidedPolicy, ckpt, gamma: float, eval_seed: int, episode: int, deterministic: bool,
-                 after_step=None) -> tuple[float, int]:  # fmt: skip
-    """Episode `episode` of a cell, one observation per forward; returns (return, length).
-    `after_step()` is called after the reset and after every step (to render a frame)."""
-    horizon, action_size = horizon_and_action_size(env, ckpt)
-    noise = episode_noise(policy.kind, eval_seed, episode, horizon, action_size)
-    obs = reset_task(env, eval_seed + episode, episode, gamma)
-    policy.reset()
-    recorded = records_episodes(env)
-    total, t, done = 0.0, 0, False
-    while True:
-        if after_step is not None:
-            after_step()
-        if done:
-            return total, t
-        action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], deterministic)[0]
-        obs, reward, terminated, truncated, info = step_task(env, action, episode, gamma, t)
-        total, t, done = total + float(reward), t + 1, terminated or truncated
-        if done and recorded:
-            total = float(recorded_return(info, episode, gamma))
+    """Reference: one episode after another, one observation per forward (padded to cell_rows(1)), each a cell
+    of its own whose episode 0 is this cell's episode k (reset seed and noise from eval_seed + k); used by the
+    tests and the benchmark. It agrees with the cells to rounding, not necessarily to the bit (see the module
+    docstring). Returns (returns, lengths), each (episodes,)."""
+    cells = [evaluate_cell(policy, ckpt, gamma, 1, eval_seed + k, deterministic) for k in range(episodes)]
+    return np.concatenate([cell["return"] for cell in cells]), np.concatenate([cell["length"] for cell in cells])
 
 
 # --- cells, resumption, output ---------------------------------------------------------------------
@@ -536,6 +546,9 @@ def check_args(args: Args) -> None:
         raise InputError("--episodes, --workers and --bootstrap-samples must be positive")
     if args.eval_seed < 0 or args.video_episode < 0:
         raise InputError(f"--eval-seed and --video-episode must be >= 0, got {args.eval_seed} and {args.video_episode}")
+    if args.video is not None and args.video_episode >= args.episodes:
+        raise InputError(f"--video-episode {args.video_episode} is not an episode of a cell of --episodes "
+                         f"{args.episodes} (0 to {args.episodes - 1}); raise --episodes to film it")  # fmt: skip
     if not args.output:
         raise InputError("--output must name a directory")
     if error := scripts.given_script_error(args.script):
@@ -601,8 +614,9 @@ class Task:
 def evaluation_code(script: Path, task_files) -> str:
     """The digest of the code that runs in a cell's episodes: the file of this sweep (or of a copy of it,
     whichever runs), the script that evaluates the checkpoint, a custom task's module (scripts.task_sources;
-    gymnasium's own tasks are named by its version in the stack), and every project module that these
-    import (cells.imported_files). An edit to any of them, or another copy of the sweep, re-evaluates the cells."""
+    gymnasium's own tasks are named by its version in the stack), and every module that these import, wherever
+    it lies, but installed packages and the standard library, which the stack's versions name (cells.imported_files).
+    An edit to any of them, or another copy of the sweep, re-evaluates the cells."""
     return code_digest(imported_files([Path(__file__), script, *task_files]))
 
 
@@ -812,22 +826,41 @@ def evaluate_missing(args: Args, output: Path, stack: tuple, cells: dict, finish
 # --- watching the knob: videos of one checkpoint at several γ ----------------------------------------
 
 
-def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, eval_seed: int, episode: int, deterministic: bool):
-    """Episode `episode` of a sweep cell at `gamma`, played as evaluate_sequential plays it, in an env of the
-    script's own make_env that renders, with its frames; returns (frames, return)."""
-    env = policy.make_env(render_mode="rgb_array")
-    frames = []
-    total, _ = play_episode(
-        env, policy, ckpt, gamma, eval_seed, episode, deterministic, lambda: frames.append(env.render())
-    )
-    env.close()
-    return frames, total
+class Filming(EpisodeHooks):
+    """Films one episode of a cell: its env, made by the script's make_env, renders, after the reset and after
+    each of its steps."""
+
+    def __init__(self, episode: int):
+        self.episode, self.env, self.frames = episode, None, []
+
+    def make_env(self, policy, episode: int):
+        if episode != self.episode:
+            return policy.make_env()
+        self.env = policy.make_env(render_mode="rgb_array")
+        return self.env
+
+    def after_reset(self, obs: np.ndarray) -> None:
+        self.frames.append(self.env.render())
+
+    def after_step(self, episode: int, t: int, obs: np.ndarray, reward: float, done: bool, info: dict) -> None:
+        if episode == self.episode:
+            self.frames.append(self.env.render())
+
+
+def record_episode(policy: GuidedPolicy, ckpt: dict, gamma: float, episodes: int, eval_seed: int, episode: int,
+                   deterministic: bool):  # fmt: skip
+    """Episode `episode` of the sweep's cell of `episodes` episodes at `gamma`, filmed as the cell plays it
+    (evaluate_cell); returns (its frames, its return, the cell's returns)."""
+    filming = Filming(episode)
+    returns = evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, deterministic, filming)["return"]
+    return filming.frames, float(returns[episode]), returns
 
 
 def record_videos(args: Args) -> list[Path]:
-    """--video: one video per γ of one checkpoint, the same episode (seed and noise) in each, and all
-    of them side by side with γ and the return written on each panel (shorter episodes hold their
-    last frame). Returns the files written."""
+    """--video: one video per γ of one checkpoint, each the sweep's cell episode --video-episode (record_episode:
+    the same reset seed and noise at every γ, and the return the cell gives it), and all of them side by side
+    with γ and the return written on each panel (shorter episodes hold their last frame). Returns the files
+    written."""
     checkpoints = find_checkpoints(args.paths, args.steps)
     if len(checkpoints) != 1:
         raise InputError(f"--video records one checkpoint; {len(checkpoints)} found "
@@ -856,13 +889,15 @@ def record_videos(args: Args) -> list[Path]:
     written, panels = [], []
     for gamma in gammas:
         try:
-            frames, total = record_episode(policy, ckpt, gamma, args.eval_seed, args.video_episode, args.deterministic)
+            frames, total, returns = record_episode(policy, ckpt, gamma, args.episodes, args.eval_seed,
+                                                    args.video_episode, args.deterministic)  # fmt: skip
         except EpisodeFault as e:
             raise InputError(f"{checkpoints[0]}: {e}") from None
         write_video(output / f"gamma_{gamma:g}.mp4", frames, fps)
         written.append(output / f"gamma_{gamma:g}.mp4")
         panels.append([labelled(frame, f"γ = {gamma:g}   return {total:.1f}") for frame in frames])
-        print(f"γ = {gamma:g}: return {total:.1f} over {len(frames) - 1} steps -> {written[-1]}", file=sys.stderr)
+        print(f"γ = {gamma:g}: episode {args.video_episode}, return {total!r} over {len(frames) - 1} steps (its cell "
+              f"of {args.episodes} episodes: mean return {returns.mean():.1f}) -> {written[-1]}", file=sys.stderr)  # fmt: skip
     longest = max(len(frames) for frames in panels)
     side_by_side = [
         np.concatenate([frames[min(t, len(frames) - 1)] for frames in panels], axis=1) for t in range(longest)

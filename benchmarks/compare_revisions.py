@@ -9,7 +9,11 @@ or the working tree as it is) into a scratch folder and runs, with this Python a
   dropout 0.1, Hopper-v4 γ_train 1.1, and a Humanoid-v4 run stopped after its first checkpoint and
   resumed (`--resume`) to the end;
 - the sweep of one discrete and one continuous checkpoint (episodes.csv, summary.csv);
-- the quick preset at fewer steps and episodes (`reproduce.py --preset quick ...`): its tables.
+- the quick preset at fewer steps and episodes (`reproduce.py --preset quick ...`): its tables;
+- the paper study's own episode tools on committed agents, each a subset of its committed output: goal
+  distances (paper_study/goal_distance.py), command tracking (paper_study/command_tracking.py) and
+  behaviour-cloned nulls (pgg_utils/bc_null.py), whose fitted checkpoints record the code that fitted them
+  (`null_fit.code`: its sha1s differ wherever that code does).
 
 Checkpoints are compared field by field (tensors with torch.equal, dtypes and shapes included), CSVs
 row by row on the columns both have, tables and reports byte for byte. A field or column that only
@@ -57,6 +61,19 @@ SWEEPS = {
 }
 QUICK = ["reproduce.py", "--preset", "quick", "--total-timesteps", "8192", "--checkpoint-interval", "4096",
          "--episodes", "4", "--workers", "1"]  # fmt: skip
+AGENTS = "results/beyond/{}/agents/{}"
+BEYOND = {
+    "goal_distance": ["paper_study/goal_distance.py", AGENTS.format("Reacher-v4", "Reacher-v4__pgg_g1.1_goal__s1"),
+                      "results/continuous/agents/Pusher-v4__pgg_g1.1__s1", "--steps", "1000000", "--gammas", "1", "1.3",
+                      "--output", "out/goal_distance.csv"],
+    "command_tracking": ["paper_study/command_tracking.py",
+                         AGENTS.format("command", "paper_study.cheetah_velocity-HalfCheetahVelocity-v0__pgg_g1.1__s1"),
+                         "--steps", "1000000", "--gammas", "1.5", "--commands", "0", "2.5",
+                         "--output", "out/tracking.csv"],
+    "bc_null": ["-m", "pgg_utils.bc_null", "results/discrete/agents/CartPole-v1__ppo__s1",
+                "results/continuous/agents/Hopper-v4__pgg_g1.1__s2", "--steps", "500000", "1000000",
+                "--output", "out/bc_null"],
+}  # fmt: skip
 TEXT_OUTPUTS = (".md", ".tex", ".csv")
 SPEED = {
     "CartPole-v1 γ_train 1.1, 40,960 steps": ["ppo_pgg_discrete.py", "--env-id", "CartPole-v1", "--guidance", "1.1",
@@ -79,6 +96,8 @@ class Args:
     """keep both revisions' outputs in this folder (default: a temporary one, removed)"""
     skip_quick: bool = False
     """leave out the quick preset (the slowest part, about a minute a revision)"""
+    skip_beyond: bool = False
+    """leave out the paper study's episode tools on committed agents (about a minute a revision)"""
     speed_pairs: int = 0
     """time training instead of comparing outputs: this many (base, head) pairs per configuration"""
 
@@ -108,7 +127,7 @@ def run(tree: Path, command: list[str], log) -> None:
         raise RuntimeError(f"{tree.name}: `{' '.join(command)}` exited {done.returncode} (log: {log.name})")
 
 
-def run_all(tree: Path, skip_quick: bool) -> None:
+def run_all(tree: Path, skip_quick: bool, skip_beyond: bool) -> None:
     """Every configuration of this module's docstring, in `tree`, outputs under tree/out."""
     with open(tree / "compare.log", "w") as log:
         for name, command in TRAINING.items():
@@ -130,6 +149,9 @@ def run_all(tree: Path, skip_quick: bool) -> None:
             )
         if not skip_quick:
             run(tree, [*QUICK, "--root", "out/quick_runs", "--results", "out/quick_results"], log)
+        if not skip_beyond:
+            for command in BEYOND.values():
+                run(tree, command, log)
 
 
 def timed_run(tree: Path, command: list[str]) -> float:
@@ -231,7 +253,7 @@ def main() -> None:
             compare_speed(trees, args.speed_pairs)
             return
         with ThreadPoolExecutor(2) as pool:  # one process per revision at a time, one thread each
-            for future in [pool.submit(run_all, tree, args.skip_quick) for tree in trees.values()]:
+            for future in [pool.submit(run_all, tree, args.skip_quick, args.skip_beyond) for tree in trees.values()]:
                 future.result()
         differences, added, compared = compare_trees(trees["base"] / "out", trees["head"] / "out")
     except (RuntimeError, subprocess.CalledProcessError) as e:

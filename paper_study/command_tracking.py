@@ -6,10 +6,11 @@ and achieved mean forward velocity, the tracking error and the return, for "Beyo
         --gammas 0.5 1 1.25 1.5 2 3 --commands -0.5 0 0.5 1 1.5 2 2.5 3 --output results/beyond/command/tracking.csv
 
 Each checkpoint is loaded by the code that trained it (pgg_utils.scripts.load_checkpoint), its task made by that
-script's make_env and checked against the spaces it was trained on. Each (checkpoint, γ, command) cell plays
---episodes episodes together through the agent's `act`, one row each: episode k resets with seed eval_seed + k
-and `options={"command": v}` and draws the sweep's action noise for episode k (eval_gamma_sweep.episode_noise),
-so every γ and command of a checkpoint starts from the same states with the same noise. A row holds the
+script's make_env and checked against the spaces it was trained on. Each (checkpoint, γ, command) cell is a sweep
+cell of --episodes episodes, played by the sweep's own loop (eval_gamma_sweep.evaluate_cell: the episodes step
+together through the agent's `act`, one row each): episode k resets with seed eval_seed + k and
+`options={"command": v}` and draws the sweep's action noise for episode k, so every γ and command of a
+checkpoint starts from the same states with the same noise. A row holds the
 command, whether it lies in the task's training range, the mean forward velocity over the episode (its
 displacement over its duration), the error of that mean (achieved − commanded), the mean per-step tracking
 error |v_t − v_cmd| (the reward's tracking term), the return and the length.
@@ -68,36 +69,30 @@ def settings_key(args: Args) -> str:
     return hashlib.sha1(json.dumps(settings).encode()).hexdigest()[:12]
 
 
-def play_cell(agent, make_env, gamma: float, command: float, episodes: int, eval_seed: int) -> list[dict]:
-    """The episodes of one cell, stepping together, one row of `act` each; a finished episode's row is
-    padded with its last observation until all are done."""
-    envs = [make_env() for _ in range(episodes)]
-    horizon, action_size = envs[0].spec.max_episode_steps, envs[0].action_space.shape[0]
-    noise = np.stack([sweep.episode_noise("continuous", eval_seed, k, horizon, action_size) for k in range(episodes)],
-                     axis=1)  # fmt: skip
-    obs = np.stack([env.reset(seed=eval_seed + k, options={"command": command})[0] for k, env in enumerate(envs)])
-    guidance = np.full(episodes, float(gamma))
-    if callable(reset := getattr(agent, "reset", None)):  # a recurrent actor starts each cell fresh, as in the sweep
-        reset()
-    returns, lengths = np.zeros(episodes), np.zeros(episodes, dtype=np.int64)
-    velocity_sum, error_sum = np.zeros(episodes), np.zeros(episodes)
-    running, t = np.ones(episodes, dtype=bool), 0
-    while running.any():
-        actions = agent.act(obs, guidance=guidance, noise=noise[t])
-        for i in np.flatnonzero(running):
-            obs[i], reward, terminated, truncated, info = envs[i].step(actions[i])
-            returns[i] += reward
-            lengths[i] += 1
-            velocity_sum[i] += info["x_velocity"]
-            error_sum[i] += abs(info["x_velocity"] - command)
-            running[i] = not (terminated or truncated)
-        t += 1
-    for env in envs:
-        env.close()
-    mean_velocity = velocity_sum / lengths
+class Tracking(sweep.EpisodeHooks):
+    """Commands every episode of a cell to `command` and sums its forward velocity and its tracking error."""
+
+    def __init__(self, command: float, episodes: int):
+        self.command = command
+        self.velocity_sum, self.error_sum = np.zeros(episodes), np.zeros(episodes)
+
+    def reset_options(self, episode: int) -> dict:
+        return {"command": self.command}
+
+    def after_step(self, episode: int, t: int, obs: np.ndarray, reward: float, done: bool, info: dict) -> None:
+        self.velocity_sum[episode] += info["x_velocity"]
+        self.error_sum[episode] += abs(info["x_velocity"] - self.command)
+
+
+def play_cell(policy, ckpt: dict, gamma: float, command: float, episodes: int, eval_seed: int) -> list[dict]:
+    """The rows of one (γ, command) cell of `policy` (eval_gamma_sweep.GuidedPolicy)."""
+    tracking = Tracking(command, episodes)
+    cell = sweep.evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, False, tracking)
+    returns, lengths = cell["return"], cell["length"]
+    mean_velocity = tracking.velocity_sum / lengths
     return [{"eval_guidance": gamma, "command": command, "episode": k, "episode_seed": eval_seed + k,
              "return": returns[k], "length": int(lengths[k]), "mean_velocity": mean_velocity[k],
-             "velocity_error": mean_velocity[k] - command, "tracking_error": error_sum[k] / lengths[k]}
+             "velocity_error": mean_velocity[k] - command, "tracking_error": tracking.error_sum[k] / lengths[k]}
             for k in range(episodes)]  # fmt: skip
 
 
@@ -126,10 +121,14 @@ def evaluate_checkpoint(path: Path, args: Args) -> tuple[list[dict], str | None]
     header = {"env_id": ckpt["env_id"], "variant": variant_id({"env_id": ckpt["env_id"], **ckpt["args"]}),
               "run": path.parent.parent.name, "seed": ckpt["args"]["seed"], "step": ckpt["step_mark"],
               "checkpoint_sha1": digest, "task_sha1": task_sha1}  # fmt: skip
-    rows = []
+    policy, rows = sweep.GuidedPolicy(agent, ckpt, module=module), []
     for gamma in args.gammas:
         for command in args.commands:
-            for row in play_cell(agent, make_env, gamma, command, args.episodes, args.eval_seed):
+            try:
+                cell = play_cell(policy, ckpt, gamma, command, args.episodes, args.eval_seed)
+            except sweep.EpisodeFault as e:
+                return [], f"{path}: {e}"
+            for row in cell:
                 rows.append({**header, **row, "in_training_range": "yes" if low <= command <= high else "no"})
     part.parent.mkdir(parents=True, exist_ok=True)
     write_csv_atomic(part, COLUMNS, rows)

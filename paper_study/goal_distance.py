@@ -4,9 +4,9 @@ distance of every episode against the eval γ, for "Beyond the paper" (paper_stu
     python paper_study/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
         results/continuous/agents --envs Reacher-v4 Pusher-v4 --steps 1000000 --output results/beyond/goal_distance.csv
 
-Each (checkpoint, γ) plays the episodes of a sweep cell (reset seed eval_seed + k, the sweep's action
-noise for episode k) one at a time through the agent's `act`, and records the distance in its last
-observation: Reacher's fingertip to target (dims 8-10), Pusher's object (17-19) to goal (20-22), from
+Each (checkpoint, γ) is a sweep cell, played by the sweep's own loop (eval_gamma_sweep.evaluate_cell: reset
+seed eval_seed + k and the sweep's action noise for episode k, the episodes stepping together through the
+agent's `act`), and each episode's distance is read from its last observation: Reacher's fingertip to target (dims 8-10), Pusher's object (17-19) to goal (20-22), from
 gymnasium's documentation of the v4 observations. The tasks' own `reward_dist` is measured before the
 step's action, one step early. One row per episode.
 """
@@ -50,22 +50,22 @@ class Args:
     """episode k resets with seed eval_seed + k, as in the sweep"""
 
 
+class FinalDistance(sweep.EpisodeHooks):
+    """The distance to the goal in each episode's last observation."""
+
+    def __init__(self, env_id: str, episodes: int):
+        self.distance_of, self.distances = FINAL_DISTANCE[env_id], [None] * episodes
+
+    def after_step(self, episode: int, t: int, obs: np.ndarray, reward: float, done: bool, info: dict) -> None:
+        if done:
+            self.distances[episode] = self.distance_of(obs)
+
+
 def final_distances(policy, ckpt: dict, gamma: float, episodes: int, eval_seed: int) -> list[tuple[float, float]]:
     """(return, final distance) of each episode of one cell."""
-    env = policy.make_env()
-    horizon, action_size = sweep.horizon_and_action_size(env, ckpt)
-    out = []
-    for k in range(episodes):
-        noise = sweep.episode_noise("continuous", eval_seed, k, horizon, action_size)
-        obs, _ = env.reset(seed=eval_seed + k)
-        total, t, done = 0.0, 0, False
-        while not done:
-            action = policy.act(obs[None], np.array([gamma]), noise[t : t + 1], False)[0]
-            obs, reward, terminated, truncated, _ = env.step(action)
-            total, t, done = total + float(reward), t + 1, terminated or truncated
-        out.append((total, FINAL_DISTANCE[ckpt["env_id"]](obs)))
-    env.close()
-    return out
+    measured = FinalDistance(ckpt["env_id"], episodes)
+    returns = sweep.evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, False, measured)["return"]
+    return [(float(total), distance) for total, distance in zip(returns, measured.distances)]
 
 
 def main() -> None:

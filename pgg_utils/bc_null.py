@@ -50,33 +50,53 @@ class Args:
     """training scripts to load with besides the repository's (as eval_gamma_sweep.py --script)"""
 
 
-def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) -> np.ndarray:
-    """The sampled actions of `episodes` episodes of the agent's policy at γ = 1, all stepping together;
-    continuous actions before clipping to the bounds (the policy's own samples)."""
-    envs = [make_env() for _ in range(episodes)]
-    rngs = [np.random.default_rng([episode_seed + k, 2]) for k in range(episodes)]
-    obs = np.stack([env.reset(seed=episode_seed + k)[0] for k, env in enumerate(envs)])
-    running, seen_actions = np.ones(episodes, dtype=bool), []
-    with torch.no_grad():
-        while running.any():
-            rows = np.flatnonzero(running)
-            if ckpt["action_space"] == "discrete":
-                logits = agent.acting_policy(obs[rows].astype(np.float32), 1.0).logits
-                gumbel = np.stack([rngs[i].gumbel(size=logits.shape[-1]) for i in rows])
-                actions = (logits + gumbel).argmax(-1)
-                env_actions = actions
+class OwnPolicy:
+    """The agent's policy at γ = 1 as the sweep's episode loop acts with it (eval_gamma_sweep.evaluate_cell, which
+    takes it in place of the sweep's GuidedPolicy), sampled with noise of its own: episode k's from
+    np.random.default_rng([episode_seed + k, 2]), in float64 (standard normal; discrete, Gumbel). It keeps each
+    step's samples, continuous ones before clipping to the bounds (the policy's own samples)."""
+
+    def __init__(self, agent, ckpt: dict, make_env):
+        self.agent, self.kind, self.make_env, self.samples = agent, ckpt["action_space"], make_env, []
+
+    def reset(self) -> None:
+        if callable(reset := getattr(self.agent, "reset", None)):  # a recurrent actor starts from a fresh state
+            reset()
+
+    def noise(self, episode_seed: int, episode: int, horizon: int, action_size: int) -> np.ndarray:
+        rng = np.random.default_rng([episode_seed + episode, 2])
+        if self.kind == "discrete":
+            return rng.gumbel(size=(horizon, action_size))
+        return rng.standard_normal(size=(horizon, action_size))
+
+    def act(self, obs: np.ndarray, guidance: np.ndarray, noise: np.ndarray, deterministic: bool) -> np.ndarray:
+        with torch.no_grad():
+            if self.kind == "discrete":
+                sampled = (self.agent.acting_policy(obs.astype(np.float32), guidance).logits + noise).argmax(-1)
             else:
-                policy = agent.acting_policy(obs[rows], 1.0)
-                noise = np.stack([rngs[i].standard_normal(policy.mode().shape[-1]) for i in rows])
-                actions = policy.sample(noise)
-                env_actions = np.clip(actions, *agent.action_bounds) if agent.action_bounds is not None else actions
-            seen_actions.append(actions)
-            for j, i in enumerate(rows):
-                obs[i], _, terminated, truncated, _ = envs[i].step(env_actions[j])
-                running[i] = not (terminated or truncated)
-    for env in envs:
-        env.close()
-    return np.concatenate(seen_actions)
+                sampled = self.agent.acting_policy(obs, guidance).sample(noise)
+        self.samples.append(sampled)
+        if self.kind == "discrete" or self.agent.action_bounds is None:
+            return sampled
+        return np.clip(sampled, *self.agent.action_bounds)
+
+    def seen_actions(self, lengths: np.ndarray) -> np.ndarray:
+        """The samples of the episodes that took each step (episode k takes steps 0 to lengths[k] - 1), step by
+        step, in episode order within a step."""
+        return np.concatenate([sampled[lengths > t] for t, sampled in enumerate(self.samples)])
+
+
+def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) -> np.ndarray:
+    """The sampled actions of `episodes` episodes of the agent's policy at γ = 1, played by the sweep's episode
+    loop (all stepping together); continuous actions before clipping to the bounds (the policy's own samples).
+    ValueError (one line) where the task raises or returns a NaN or an infinity."""
+    sweep = scripts.load_module(scripts.REPOSITORY / "eval_gamma_sweep.py")  # found by path, as a script is
+    policy = OwnPolicy(agent, ckpt, make_env)
+    try:
+        lengths = sweep.evaluate_cell(policy, ckpt, 1.0, episodes, episode_seed, False)["length"]
+    except sweep.EpisodeFault as e:
+        raise ValueError(str(e)) from None
+    return policy.seen_actions(lengths)
 
 
 def reach(agent, kind: str, null: torch.Tensor, actions: np.ndarray) -> float:

@@ -7,8 +7,15 @@ A cell holds the sweep's columns (EPISODE_COLUMNS) and, after them, whatever per
 that wrote it adds (a copy of the sweep that measures more: eval_gamma_sweep.py, "Changing the episodes")."""
 
 import ast
+import functools
 import hashlib
+import importlib.machinery
+import importlib.util
 import json
+import os
+import site
+import sys
+import sysconfig
 from pathlib import Path
 
 from pgg_utils import checkpoints
@@ -24,7 +31,11 @@ EPISODE_COLUMNS = [
     *STACK_COLUMNS, "action_space",
 ]  # fmt: skip
 CHECKSUM = "checksum"  # a cell file's last column: each row proves that it is whole and whose it is
-PACKAGE = Path(__file__).resolve().parent  # pgg_utils, wherever it is installed
+# This project's top-level modules (pyproject.toml's py-modules and packages): part of a cell's key wherever
+# they lie, an installed copy's site-packages too, as no version in the key stands for them.
+PROJECT_MODULES = frozenset({"pgg_utils", "paper_study", "ppo_pgg_discrete", "ppo_pgg_continuous", "eval_gamma_sweep",
+                             "plot_results", "reproduce"})  # fmt: skip
+INSTALLED_FOLDER_NAMES = {"site-packages", "dist-packages"}
 
 
 def evaluation_stack() -> tuple[str, ...]:
@@ -34,51 +45,114 @@ def evaluation_stack() -> tuple[str, ...]:
 
 
 def imported_files(roots) -> list[Path]:
-    """The files `roots` and every project module they import, transitively, as their import statements
-    (each one, at the top of a file or inside a function) name them: the modules of this package and the
-    modules beside the file that imports them (a fork's helper module, the original script a fork imports).
-    Installed packages are not followed: their versions are the evaluation stack's (STACK_COLUMNS)."""
-    todo, found = [Path(root).resolve() for root in roots], set()
+    """The files `roots` and every module they import, transitively, as their import statements (each one, at
+    the top of a file or inside a function) name them, wherever the module lies: this project's own modules, a
+    fork's helper module beside it, a module on PYTHONPATH, a task package's other modules. Found as Python finds
+    them (the module this process imported under that name, else the import path, else beside the importing
+    file), never imported. Not followed: installed packages and the standard library (`installed`), whose
+    versions stand for them in a cell's key (STACK_COLUMNS): their thousands of files are never read."""
+    importlib.invalidate_caches()  # a module written since the finders listed its folder is found
+    todo, found, resolved = [Path(root).resolve() for root in roots], set(), {}
     while todo:
         path = todo.pop()
         if path in found:
             continue
         found.add(path)
-        for node in ast.walk(ast.parse(path.read_bytes(), str(path))):
+        if path.suffix != ".py":  # compiled code: its bytes are its identity, it names no imports we can read
+            continue
+        for node in import_statements(ast.parse(path.read_bytes(), str(path))):
             if isinstance(node, ast.Import):
                 names = [alias.name for alias in node.names]
-            elif isinstance(node, ast.ImportFrom):  # `from a import b`: b may be a module of a
+            else:  # `from a import b`: b may be a module of a
                 module = "." * node.level + (node.module or "")
                 names = [module, *(module + ("." if node.module else "") + alias.name for alias in node.names)]
-            else:
-                continue
-            todo.extend(file for name in names for file in module_files(name, path.parent))
+            for name in names:
+                if (name, path.parent) not in resolved:
+                    resolved[name, path.parent] = module_files(name, path.parent)
+                todo.extend(resolved[name, path.parent])
     return sorted(found)
 
 
+def import_statements(tree: ast.Module):
+    """Every import statement of a module, at its top or nested in any block (a function, a class, a try):
+    statements lie only in blocks, so no expression is visited."""
+    todo = [tree]
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            yield node
+        for block in ("body", "orelse", "finalbody", "handlers", "cases"):
+            todo.extend(getattr(node, block, ()))
+
+
 def module_files(name: str, folder: Path) -> list[Path]:
-    """The project files that importing `name` from a file in `folder` runs: each package's __init__ on the
-    way and the module itself, found beside the importing file or at the top of the repository (this
-    package's folder); [] for a module of an installed package or of the standard library."""
-    parts, level = name.lstrip(".").split("."), len(name) - len(name.lstrip("."))
-    if level:  # relative: from `folder`, one folder up per dot after the first
-        bases = [folder.parents[level - 2] if level > 1 else folder]
+    """The files of code that importing `name` from a file in `folder` runs, each package's __init__ on the way
+    and the module itself; [] for a module of an installed package or of the standard library (`installed`),
+    but for this project's own (PROJECT_MODULES), which no version in a cell's key stands for."""
+    level = len(name) - len(name.lstrip("."))
+    parts = name[level:].split(".") if name[level:] else []
+    if level:  # relative: from the importing file's package, one folder up per dot after the first
+        if level - 2 >= len(folder.parents):  # above the file system's root: the import itself fails
+            return []
+        package = folder.parents[level - 2] if level > 1 else folder
+        spec = importlib.machinery.PathFinder.find_spec(package.name, [str(package.parent)])
+        parts = [package.name, *parts]
     else:
-        bases = [PACKAGE.parent] if parts[0] == PACKAGE.name else [folder, PACKAGE.parent]
-    for base in bases:
-        files, here = [], base
-        for part in filter(None, parts):
-            here = here / part
-            if (here / "__init__.py").is_file():
-                files.append(here / "__init__.py")
-            elif here.with_suffix(".py").is_file():
-                files.append(here.with_suffix(".py"))
-                break
-            else:
-                break
-        if files:
-            return files
-    return []
+        spec = top_level_spec(parts[0], folder)
+    files = []
+    for depth in range(1, len(parts) + 1):
+        if spec is None:
+            break
+        origin = Path(spec.origin) if spec.has_location and spec.origin else None
+        locations = list(spec.submodule_search_locations or [])
+        if depth == 1 and not level and parts[0] not in PROJECT_MODULES:
+            where = [origin] if origin else [Path(location) for location in locations]
+            if not where or any(map(installed, where)):
+                return []
+        if origin is not None and origin.is_file():
+            files.append(origin.resolve())
+        if depth == len(parts) or not locations:
+            break
+        spec = submodule_spec(".".join(parts[: depth + 1]), locations)
+    return files
+
+
+def top_level_spec(name: str, folder: Path):
+    """How Python finds the top-level module `name`: the one this process imported, else on the import path
+    (sys.meta_path's finders, an editable install's among them), else a file beside the importer (a fork loaded
+    from its path, whose folder is not on the path)."""
+    if (spec := getattr(sys.modules.get(name), "__spec__", None)) is not None:
+        return spec
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):  # a finder that refuses the name
+        spec = None
+    return spec or importlib.machinery.PathFinder.find_spec(name, [str(folder)])
+
+
+def submodule_spec(name: str, locations: list[str]):
+    """The spec of the submodule `name` (dotted) of a package found in `locations`, as imported or as it would be."""
+    if (spec := getattr(sys.modules.get(name), "__spec__", None)) is not None:
+        return spec
+    return importlib.machinery.PathFinder.find_spec(name, locations)
+
+
+@functools.cache
+def installed_folders() -> tuple[Path, ...]:
+    """Where this interpreter's standard library and installed packages lie."""
+    paths = sysconfig.get_paths()
+    folders = [paths[key] for key in ("stdlib", "platstdlib", "purelib", "platlib")]
+    folders += [*site.getsitepackages(), site.getusersitepackages()]
+    return tuple(dict.fromkeys(Path(folder).resolve() for folder in folders))
+
+
+def installed(path: Path) -> bool:
+    """Whether `path` belongs to the standard library or an installed package: under one of this interpreter's
+    folders for them, or in any folder named site-packages or dist-packages (another environment's)."""
+    for where in dict.fromkeys((Path(os.path.abspath(path)), Path(path).resolve())):
+        if INSTALLED_FOLDER_NAMES & set(where.parts) or any(where.is_relative_to(f) for f in installed_folders()):
+            return True
+    return False
 
 
 def code_digest(files) -> str:

@@ -201,8 +201,7 @@ def test_an_actor_with_batch_norm_trains_with_and_without_guidance(kind, guidanc
     swept = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 2, 10_000, False)
     assert np.isfinite(swept["return"]).all() and (swept["length"] > 0).all()  # the sweep's batched episodes
     running = norm.running_mean.clone()
-    sweep.play_episode(module.make_env(ckpt["env_id"])(), sweep.GuidedPolicy(agent, ckpt, module=module), ckpt,
-                       1.5, 10_000, 0, False)  # fmt: skip
+    sweep.evaluate_sequential(sweep.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 1, 10_000, False)
     assert torch.equal(norm.running_mean, running)  # evaluation moves no statistics
 
 
@@ -357,8 +356,7 @@ def test_every_sweep_episode_starts_the_actor_from_a_fresh_state():
     agent = CountingActor()
     ckpt = {"action_space": "discrete", "env_id": "CartPole-v1", "n_actions": 2}
     guided = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
-    env = guided.make_env()
-    lengths = [sweep.play_episode(env, guided, ckpt, 1.0, 10_000, episode, True)[1] for episode in range(3)]
+    lengths = sweep.evaluate_sequential(guided, ckpt, 1.0, 3, 10_000, True)[1]
     sweep.evaluate_cell(guided, ckpt, 1.0, 2, 10_000, True)
     assert min(lengths) > 1 and agent.first_steps == [1, 1, 1, 1]  # the sequential path, then the cell's start
 

@@ -633,8 +633,8 @@ def frame_count(path: Path) -> int:
 
 def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     """One video per γ of episode k (its reset seed and noise, as in a sweep cell), each frame of it,
-    and a side-by-side video as long as the longest. The recorded episode is the sequential
-    reference's episode k: its length fixes the frame count."""
+    and a side-by-side video as long as the longest. The recorded episode is the sweep cell's episode k:
+    its length fixes the frame count."""
     pytest.importorskip("moviepy", reason="--video needs the [video] extra")
     pytest.importorskip("pygame", reason="CartPole renders with pygame (the [video] extra)")
     path = checkpoint(runs, "discrete")
@@ -644,7 +644,8 @@ def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     agent, ckpt = sweep.load_any_checkpoint(path)
     policy = sweep.GuidedPolicy(agent, ckpt)
     lengths = [
-        int(sweep.evaluate_sequential(policy, ckpt, gamma, 3, args.eval_seed, False)[1][2]) for gamma in (1.0, 5.0)
+        int(sweep.evaluate_cell(policy, ckpt, gamma, args.episodes, args.eval_seed, False)["length"][2])
+        for gamma in (1.0, 5.0)
     ]
     assert [frame_count(p) for p in written] == [lengths[0] + 1, lengths[1] + 1, max(lengths) + 1]
     assert not list((tmp_path / "videos").glob(".*tmp*"))

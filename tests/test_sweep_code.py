@@ -158,8 +158,8 @@ def test_video_makes_its_env_with_the_scripts_make_env(monkeypatch):
     monkeypatch.setattr(ppo_pgg_discrete, "make_env", make_env)
     agent, ckpt = sweep.load_any_checkpoint(FIXTURE)
     policy = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
-    frames, total = sweep.record_episode(policy, ckpt, 1.0, 10_000, 0, True)
-    assert made == ["rgb_array"] and len(frames) == total + 1 and frames[0].ndim == 3
+    frames, total, _ = sweep.record_episode(policy, ckpt, 1.0, 3, 10_000, 1, True)
+    assert made == [None, "rgb_array", None] and len(frames) == total + 1 and frames[0].ndim == 3
 
 
 def test_the_code_of_a_cell_is_read_from_import_statements(tmp_path):
