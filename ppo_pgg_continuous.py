@@ -42,6 +42,7 @@ from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm
 from pgg_utils.policy import (
+    RATIO_CHECK_ROWS,
     PathError,
     branch_pass,
     eval_mode,
@@ -597,7 +598,9 @@ def train(args: Args, run: runs.Run) -> None:
     loss_fn = torch.compile(minibatch_loss) if args.compile else minibatch_loss
 
     batch_size = args.num_envs * args.num_steps
-    probe_rows = torch.arange(batch_size // args.num_minibatches)  # the rows of each iteration's ratio check
+    probe_rows = torch.arange(
+        0, batch_size, -(-batch_size // RATIO_CHECK_ROWS)
+    )  # the ratio check's, across the rollout
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
     schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner

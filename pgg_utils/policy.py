@@ -35,6 +35,9 @@ PROBE_RTOL, PROBE_ATOL = 1e-4, 1e-5
 # batch, and (looser: float32 rounding of trained networks on a whole minibatch) on every update's first minibatch.
 PROBE_MAX_KL = 1e-7
 LIVE_MAX_KL = 1e-6
+# The rows of the rollout the ratio check reads before each update: a stale path moves every row; a minibatch's
+# worth cost 1% of a CartPole iteration, these a third of that (benchmarks/bench_live_checks.py).
+RATIO_CHECK_ROWS = 16
 # Layers whose training mode mixes rows, moves statistics or draws noise.
 MODE_DEPENDENT = (nn.modules.batchnorm._BatchNorm, nn.modules.dropout._DropoutNd)
 
