@@ -42,7 +42,6 @@ from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm
 from pgg_utils.policy import (
-    RATIO_CHECK_ROWS,
     PathError,
     branch_pass,
     eval_mode,
@@ -515,6 +514,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
     minibatch_size = batch_size // args.num_minibatches
 
     per_minibatch = defaultdict(list)  # averaged over every minibatch, as CleanRL does the clip fraction
+    first_approx_kl = None  # the first minibatch's, before any step: on the parameters that acted, every ratio is 1
     for _ in range(args.update_epochs):
         b_inds = torch.randperm(batch_size)
         for start in range(0, batch_size, minibatch_size):
@@ -523,6 +523,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
                 drop_mask = torch.rand(minibatch_size) < args.cond_dropout  # PGG
             mb_inds = b_inds[start : start + minibatch_size]
             loss, stats = loss_fn(agent, batch, mb_inds, drop_mask, guidance, args)  # PGG
+            first_approx_kl = stats["losses/approx_kl"] if first_approx_kl is None else first_approx_kl
             for key in ("losses/clipfrac", *(key for key in stats if key.startswith("pgg/"))):  # PGG
                 per_minibatch[key].append(stats[key])
 
@@ -537,6 +538,7 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
     y_pred, y_true = batch["values"].numpy(), batch["returns"].numpy()
     var_y = np.var(y_true)
     stats = {key: value.item() for key, value in stats.items()}
+    stats["losses/first_approx_kl"] = first_approx_kl.item()
     stats.update({key: torch.stack(values).mean().item() for key, values in per_minibatch.items()})
     stats["losses/explained_variance"] = float("nan") if var_y == 0 else float(1 - np.var(y_true - y_pred) / var_y)
     return stats
@@ -598,9 +600,6 @@ def train(args: Args, run: runs.Run) -> None:
     loss_fn = torch.compile(minibatch_loss) if args.compile else minibatch_loss
 
     batch_size = args.num_envs * args.num_steps
-    probe_rows = torch.arange(
-        0, batch_size, -(-batch_size // RATIO_CHECK_ROWS)
-    )  # the ratio check's, across the rollout
     # Ceil, not CleanRL's floor, so that the final checkpoint lies at or past total_timesteps.
     num_iterations = -(-args.total_timesteps // batch_size)
     schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
@@ -637,10 +636,8 @@ def train(args: Args, run: runs.Run) -> None:
             # a tensor, and the float is what trained the tables' runs.
             scheduled = args.compile and args.guidance_schedule != "constant"  # PGG
             loss_guidance = (torch.tensor(guidance) if scheduled else guidance) if guided else None  # PGG
-            # On the parameters that acted, the loss gives the rollout's actions the rollout's log-probs (ratio 1).
-            batch = flatten_rollout(buf, advantages, returns)
-            first_ratio_error(sys.modules[__name__], agent, batch, probe_rows, loss_guidance, args)  # PGG
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
+            first_ratio_error(agent, stats)  # the loss, before its first step, gave the rollout's log-probs
             stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
             schedule.observe(stats)  # PGG: the adaptive rule's step
             stats["charts/action_std_mean"] = agent.actor_logstd.exp().mean().item()

@@ -1,12 +1,12 @@
-"""What the live checks of the policy paths cost a training run: the ratio check before every update
-(`pgg_utils.policy.first_ratio_error`, one minibatch's loss without gradient) and the probe before every checkpoint
-(`path_error` on the trained agent), against one training iteration (rollout, GAE, update) of the same run.
+"""What the live checks of the policy paths cost a training run: the probe before every checkpoint (`path_error` on
+the trained agent) against one training iteration (rollout, GAE, update) of the same run. The ratio check of every
+update costs nothing to measure: it reads the first minibatch's approx_kl, which ppo_update computes anyway.
 
     python -m benchmarks.bench_live_checks            # CartPole-v1 and Hopper-v4 at γ_train 1.1, 5 rounds each
 
-Each round times one iteration and then each check, in one process with one torch thread, so the ratios hold on a
-loaded machine; it prints the median and range of each check's share of an iteration, and the share of a run of the
-default length (a ratio check per iteration, a probe per 200k steps)."""
+Each round times one iteration and then the probe, in one process with one torch thread, so the ratio holds on a
+loaded machine; it prints the median and range of the probe's share of an iteration, and its share of a run (a probe
+per --checkpoint-interval steps, 200k by default)."""
 
 import time
 from dataclasses import asdict
@@ -17,7 +17,7 @@ import torch
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils.policy import RATIO_CHECK_ROWS, first_ratio_error, path_error, probe_observations
+from pgg_utils.policy import path_error, probe_observations
 
 ROUNDS = 5
 
@@ -46,31 +46,23 @@ def bench(module, env_id: str) -> None:
     raw, _ = envs.reset(seed=args.seed)
     next_obs = agent.obs_norm.observe(raw) if continuous else raw
     next_done = np.zeros(args.num_envs, dtype=np.float32)
-    batch_size = args.num_envs * args.num_steps
-    rows = torch.arange(0, batch_size, -(-batch_size // RATIO_CHECK_ROWS))  # the training scripts' rows
-    shares = {"ratio check": [], "checkpoint probe": []}
+    seconds = {"iteration": [], "checkpoint probe": []}
     for _ in range(ROUNDS):
         start = time.perf_counter()
         policy = module.FastPolicy(agent, args.guidance)
         next_obs, next_done = module.collect_rollout(policy, envs, next_obs, next_done, buf, lambda *a: None, 0)
         advantages, returns = module.compute_gae(buf, policy.value(next_obs), next_done, args.discount, args.gae_lambda)
-        checked = time.perf_counter()
-        first_ratio_error(module, agent, module.flatten_rollout(buf, advantages, returns), rows, args.guidance, args)
-        updated = time.perf_counter()
         module.ppo_update(agent, optimizer, buf, advantages, returns, args, args.guidance)
         done = time.perf_counter()
         path_error(module, agent, args, probe, normalise, noise)
-        probed = time.perf_counter()
-        iteration = (checked - start) + (done - updated)
-        shares["ratio check"].append((updated - checked) / iteration)
-        shares["checkpoint probe"].append((probed - done) / iteration)
-    iterations_per_checkpoint = 200_000 / (args.num_envs * args.num_steps)
-    ratio, probe_share = median(shares["ratio check"]), median(shares["checkpoint probe"])
-    print(f"{env_id}: ratio check {100 * ratio:.3f}% of an iteration "
-          f"({100 * min(shares['ratio check']):.3f}-{100 * max(shares['ratio check']):.3f}); checkpoint probe "
-          f"{100 * probe_share:.2f}% of one iteration, {100 * probe_share / iterations_per_checkpoint:.3f}% of the "
-          f"iterations between checkpoints; both: {100 * (ratio + probe_share / iterations_per_checkpoint):.3f}% "
-          "of a run")  # fmt: skip
+        seconds["iteration"].append(done - start)
+        seconds["checkpoint probe"].append(time.perf_counter() - done)
+    shares = [probe / iteration for probe, iteration in zip(seconds["checkpoint probe"], seconds["iteration"])]
+    iterations_per_checkpoint = args.checkpoint_interval / (args.num_envs * args.num_steps)
+    print(f"{env_id}: median ms: " + ", ".join(f"{key} {1000 * median(values):.2f}" for key, values in seconds.items())
+          + f"; the probe is {100 * median(shares):.2f}% of one iteration ({100 * min(shares):.2f}-"
+          f"{100 * max(shares):.2f}), {100 * median(shares) / iterations_per_checkpoint:.4f}% of the iterations "
+          f"between two checkpoints")  # fmt: skip
     envs.close()
 
 

@@ -35,9 +35,6 @@ PROBE_RTOL, PROBE_ATOL = 1e-4, 1e-5
 # batch, and (looser: float32 rounding of trained networks on a whole minibatch) on every update's first minibatch.
 PROBE_MAX_KL = 1e-7
 LIVE_MAX_KL = 1e-6
-# The rows of the rollout the ratio check reads before each update: a stale path moves every row; a minibatch's
-# worth cost 1% of a CartPole iteration, these a third of that (benchmarks/bench_live_checks.py).
-RATIO_CHECK_ROWS = 16
 # Layers whose training mode mixes rows, moves statistics or draws noise.
 MODE_DEPENDENT = (nn.modules.batchnorm._BatchNorm, nn.modules.dropout._DropoutNd)
 
@@ -195,17 +192,14 @@ def randomised(agent):
     return probed
 
 
-def first_ratio_error(script, agent, batch: dict, rows, guidance, args) -> None:
-    """PathError where the loss (`script.minibatch_loss` on the `rows` of the flattened rollout `batch`), computed
-    before the update on the parameters that acted, does not give the rollout's actions the rollout's
+def first_ratio_error(agent, stats: dict) -> None:
+    """PathError where an update's first minibatch (`stats["losses/first_approx_kl"]`, ppo_update's), computed before
+    any optimizer step on the parameters that acted, does not give the rollout's actions the rollout's
     log-probabilities (every ratio 1). Not for an agent whose training mode computes another function (BatchNorm's
-    batch statistics, Dropout): its loss's policy is not the one that acted, by design, and a pass would move its
-    statistics. A non-finite KL is left to the run's own check of non-finite losses."""
-    if mode_dependent(agent):
-        return
-    with torch.no_grad():
-        kl = float(script.minibatch_loss(agent, batch, rows, None, guidance, args)[1]["losses/approx_kl"])
-    if math.isfinite(kl) and kl > LIVE_MAX_KL:
+    batch statistics, Dropout): its loss's policy is not the one that acted, by design. A non-finite KL is left to
+    the run's own check of non-finite losses."""
+    kl = stats["losses/first_approx_kl"]
+    if not mode_dependent(agent) and math.isfinite(kl) and kl > LIVE_MAX_KL:
         raise PathError(
             f"the first minibatch's ratio is not 1 (approx_kl {kl:.3g} before any step): minibatch_loss's "
             "log-probabilities of the rollout's actions differ from the rollouts' own (FastPolicy.act)"
