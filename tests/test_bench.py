@@ -243,8 +243,9 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
                beyond_rows("Reacher-v4", "pgg_g1.1_goal", {1_000_000: [-5, -6, -7, -8, -9]}))  # fmt: skip
     distances = {1.0: 0.10, 1.2: 0.08, 1.5: 0.12}  # goal guidance that brings the fingertip closest at γ = 1.2
     write_rows(tmp_path / "beyond" / "goal_distance.csv",
-               [{"env_id": "Reacher-v4", "variant": "pgg_g1.1_goal", "seed": seed, "eval_guidance": gamma,
-                 "final_distance": d + 0.01 * seed} for gamma, d in distances.items() for seed in (1, 2)])  # fmt: skip
+               [{"env_id": "Reacher-v4", "variant": "pgg_g1.1_goal", "seed": seed, "step": 1_000_000,
+                 "eval_guidance": gamma, "final_distance": d + 0.01 * seed}
+                for gamma, d in distances.items() for seed in (1, 2)])  # fmt: skip
     # γ_train logged at each iteration's step; the checkpoints of 200k and 1M are saved after the iterations of 200704
     # and 1001472, the first to reach their marks
     trajectory = {198_656: 1.0, 200_704: 1.05, 999_424: 1.1, 1_001_472: 1.2}
