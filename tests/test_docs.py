@@ -160,6 +160,7 @@ BC = " null=bc"  # a behaviour-cloned null's rows (paper_study/beyond_report.py)
 CLONING = "pgg_g1.1_bc0.1"  # the variant that clones while it trains
 FALL = "largest γ vs best (%)"
 CMD, NULL17 = "paper_study.cheetah_velocity:HalfCheetahVelocity-v0", "pgg_g1.1_null17"  # the command task's set
+DROP17, DROP_NULL, DROP_G1 = "pgg_drop0.1_null17", "condition dropout learned null", "condition dropout vs γ 1"
 BEYOND_SOURCES = [
     (H, LIN, "", "seeds"),  # 5 seeds
     (U, LIN, PPO, "fall difference (pts)"), (U, LIN, PPO, "fall p Holm"),
@@ -180,6 +181,12 @@ BEYOND_SOURCES = [
     (CMD, "", "command", "velocity at command 2 at γ 1"), None,  # below 1
     (CMD, NULL17, CON, "knob change at γ 0.5"), (CMD, NULL17, CON, "baseline's knob change at γ 0.5"),
     (CMD, NULL17, CON, "knob p Holm at γ 0.5"), (CMD, NULL17, "", "gain at γ 0.5"), (CMD, CON, "", "gain at γ 0.5"),
+    None, (CMD, DROP17, DROP_NULL, "pseudo-command min"), (CMD, DROP17, DROP_NULL, "pseudo-command max"),  # γ > 1
+    (CMD, NULL17, DROP_NULL, "pseudo-command min"), (CMD, NULL17, DROP_NULL, "pseudo-command max"),
+    None, (CMD, DROP17, DROP_G1, "gain change at γ 1.5"), None, (CMD, DROP17, DROP_G1, "gain p Holm at γ 1.5"),
+    (CMD, DROP17, DROP_G1, "tracking error change at γ 1.5"), (CMD, DROP17, DROP_G1, "tracking error p Holm at γ 1.5"),
+    (CMD, DROP17, DROP_G1, "tracking error middle change at γ 1.5"),
+    (CMD, DROP17, DROP_G1, "tracking error middle p Holm at γ 1.5"),
 ]  # fmt: skip
 
 
