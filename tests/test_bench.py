@@ -59,6 +59,7 @@ def test_overhead_interval_contains_the_ratio_of_sums():
     assert text == "+10.0% (+10.0% to +10.0%)"
 
 
+@pytest.mark.slow
 def test_sweep_checkpoints_are_matched_to_their_env_and_bad_ones_are_one_line_of_error(tmp_path):
     args = tiny_run(1.1)
     args.output_dir, args.checkpoint_interval = str(tmp_path), 10**9
@@ -363,6 +364,7 @@ def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observati
     assert distance == pytest.approx(np.linalg.norm(obs[8:11])) and total < 0
 
 
+@pytest.mark.slow
 def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
     """results/beyond/report.md, report.csv and report_values.csv regenerate from the committed CSVs alone: a changed script or CSV
     whose report was not rewritten fails here. Floats are compared to 1e-9 (another CPU may round a sum

@@ -70,6 +70,7 @@ def test_one_seed_replays_the_same_episode():
     np.testing.assert_array_equal(*trajectories)
 
 
+@pytest.mark.slow
 def test_the_module_id_registers_the_task_and_training_imports_none_of_the_paper_study():
     """`gym.make` of the module-qualified id imports the module, which registers the task with its time limit and
     render modes; the training script and pgg_utils import nothing of paper_study (the task is a user's own)."""
@@ -108,6 +109,7 @@ def tracking_args(tmp_path, paths, **overrides) -> command_tracking.Args:
     return command_tracking.Args(paths=tuple(map(str, paths)), **{**settings, **overrides})
 
 
+@pytest.mark.slow
 def test_tracking_replays_each_episode_as_the_agent_acts_alone(command_run, tmp_path):
     """Each row is the episode the agent plays on its own (reset seed eval_seed + k with the command, the sweep's
     noise for episode k, one observation per `act`): its command, mean velocity (displacement over duration),
@@ -140,6 +142,7 @@ def test_tracking_replays_each_episode_as_the_agent_acts_alone(command_run, tmp_
     assert {r["in_training_range"] for r in again} == {"YES", "no"}
 
 
+@pytest.mark.slow
 def test_tracking_skips_another_tasks_checkpoint_and_refuses_bad_settings_in_one_line(tmp_path):
     """A checkpoint of another task is named and left out (no rows); with nothing left, an error line, exit 2, no
     file; a repeated γ or a zero episode count is one line, exit 2."""
@@ -158,6 +161,7 @@ def test_tracking_skips_another_tasks_checkpoint_and_refuses_bad_settings_in_one
         assert message in one_line_error(proc)
 
 
+@pytest.mark.slow
 def test_the_cli_writes_every_episode_sorted(command_run, tmp_path):
     """The command writes one row per episode of every cell, with the CSV's columns, in a stable order."""
     proc = run_script("paper_study/command_tracking.py", str(command_run), "--output", str(tmp_path / "t.csv"),

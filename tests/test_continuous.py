@@ -121,6 +121,7 @@ print(json.dumps(mean.double().tolist()))
 """
 
 
+@pytest.mark.slow
 def test_checkpoint_carries_observation_statistics(tmp_path):
     """A checkpoint alone maps a raw observation to the training-time action mean (cleanrl#425)."""
     run_dir = run(tiny_args(tmp_path, guidance=1.1, env_id="Hopper-v4"))
@@ -246,6 +247,7 @@ def test_reward_scaling_matches_gymnasium_bit_for_bit():
     assert max(abs(r) for r in rewards) == 1.0 and min(abs(r) for r in rewards) < 0.5  # clipped and not
 
 
+@pytest.mark.slow
 def test_short_inverted_pendulum_run_learns(tmp_path):
     run_dir = run(
         pgg.Args(env_id="InvertedPendulum-v4", total_timesteps=30_000, guidance=1.1, output_dir=str(tmp_path))

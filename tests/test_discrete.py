@@ -257,6 +257,7 @@ def evaluate(agent, guidance, episodes=10, seed=1000):
     return float(np.mean(returns))
 
 
+@pytest.mark.slow
 def test_short_cartpole_run_learns(tmp_path):
     run_dir = run(pgg.Args(total_timesteps=50_000, guidance=1.1, output_dir=str(tmp_path)))
     agent, _ = pgg.load_checkpoint(checkpoints.checkpoint_path(run_dir, 50_000))

@@ -66,6 +66,7 @@ def test_readme_stays_a_front_page_with_the_ci_commands():
         assert command in readme and command in ci
 
 
+@pytest.mark.slow
 def test_the_readmes_trained_agent_snippet_runs_and_prints_the_same_return_twice():
     """The front page's "Use a trained agent" code, run as written, twice, from the repository's root, on the
     shipped agent it names: `act` samples from torch's generator, so without the snippet's seed the two runs
@@ -83,6 +84,7 @@ def test_the_readmes_trained_agent_snippet_runs_and_prints_the_same_return_twice
     assert "samples" in beside and "without the seed" in beside  # the paragraph beside the code says why
 
 
+@pytest.mark.slow
 def test_the_test_count_the_pages_give_is_the_suites():
     """The "about N tests" of the front page and of docs/usage.md is within 10% of what pytest collects."""
     proc = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider"], cwd=ROOT,
@@ -100,6 +102,7 @@ def bash_block(text: str, after: str) -> list[str]:
     return [line.split("  #", 1)[0].strip() for line in block.splitlines() if line.strip()]
 
 
+@pytest.mark.slow
 def test_the_which_gamma_recipe_runs_on_a_tiny_cartpole_run(tmp_path):
     """The front page's three commands for choosing γ on a new task (the same as docs/usage.md's), run on two
     tiny CartPole seeds in place of runs/mytask, 5 episodes a cell: the held-out tool reports the γ chosen on
@@ -121,6 +124,7 @@ def test_the_which_gamma_recipe_runs_on_a_tiny_cartpole_run(tmp_path):
     assert "CartPole-v1" in report and "episode seeds 20000–20004" in report
 
 
+@pytest.mark.slow
 def test_the_custom_task_example_trains_as_written(tmp_path):
     """docs/usage.md's custom task, saved as the module it names, trains with the discrete script; its
     `__init__` takes `render_mode`, which every task is made with (one without it is refused before training)

@@ -171,6 +171,7 @@ def rollout_batch(module, num_steps: int, num_envs: int) -> dict[str, torch.Tens
     }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module", [discrete, continuous], ids=["discrete", "continuous"])
 def test_compiled_minibatch_loss_matches_eager(module):
     """--compile: the compiled loss, its statistics and its gradient agree with the eager ones to

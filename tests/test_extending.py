@@ -655,6 +655,7 @@ else:
 """
 
 
+@pytest.mark.slow
 def test_training_the_sweep_and_act_work_in_a_copy_without_the_paper_study(tmp_path):
     core = tmp_path / "core"
     shutil.copytree(ROOT / "pgg_utils", core / "pgg_utils", ignore=shutil.ignore_patterns("__pycache__"))

@@ -170,6 +170,7 @@ def test_rows_record_the_stack_and_a_cell_of_another_mujoco_is_evaluated_again(t
 # --- configurations ---------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_configuration_is_named_against_the_frozen_reference_not_the_scripts_defaults(tmp_path):
     """Seed 1 swept by this process and seed 2 by a later one, after the script's default ent_coef
     moved to 0.02: both were trained at 0.01, CleanRL's, and stay one configuration of two seeds."""
@@ -347,6 +348,7 @@ def test_a_task_without_a_time_limit_is_refused_in_one_line_before_any_episode(t
     assert "has no time limit (max_episode_steps)" in skipped["reason"] and not evaluated
 
 
+@pytest.mark.slow
 def test_a_task_whose_module_is_gone_is_skipped_in_one_line(tmp_path, monkeypatch):
     run_dir = trained_on_custom_task(tmp_path, monkeypatch)
     (tmp_path / "tasks" / "fault_walk_task.py").unlink()

@@ -86,6 +86,7 @@ def test_the_kl_is_that_of_two_diagonal_gaussians():
     assert learned_null.gaussian_kl(p, q) == pytest.approx(expected.sum(-1).numpy())
 
 
+@pytest.mark.slow
 def test_the_cli_writes_a_row_per_checkpoint_and_refuses_bad_input_in_one_line(command_run, tmp_path):
     """A row per checkpoint with the CSV's columns; another task's checkpoint is named and left out, and with nothing
     left, or a zero episode count, one line of error and exit 2, no file."""

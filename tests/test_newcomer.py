@@ -52,6 +52,7 @@ sweep.main()
 """
 
 
+@pytest.mark.slow
 def test_a_sigkilled_worker_ends_the_sweep_with_one_line_and_a_rerun_completes_it(tmp_path):
     flags = [str(FORMAT_2), "--gammas", "1", "2", "5", "10", "--episodes", "4", "--workers", "2"]
     start = time.time()
@@ -84,6 +85,7 @@ def tiny_grid(tmp_path, name: str, **overrides) -> reproduce.Args:
     return replace(args, **overrides)
 
 
+@pytest.mark.slow
 def test_reproduce_on_a_task_outside_the_paper_ends_with_its_tables_and_agents(tmp_path, capsys):
     assert reproduce.reproduce(tiny_grid(tmp_path, "results", envs=("MountainCar-v0",))) == 0
     results = tmp_path / "results"
@@ -106,6 +108,7 @@ def test_compare_paper_on_tasks_outside_the_paper_is_a_note_and_exit_0(tmp_path)
 # --- 3. runs of another grid ----------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_runs_trained_with_other_arguments_are_refused_and_never_swept(tmp_path, capsys):
     assert reproduce.reproduce(tiny_grid(tmp_path, "first")) == 0  # s1, 1,024 steps
     second = tiny_grid(tmp_path, "second", seeds=2, total_timesteps=2048, checkpoint_interval=1024)
@@ -127,6 +130,7 @@ QUICK = ["--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--ch
          "--gammas", "1", "--episodes", "2", "--workers", "1"]  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_second_launcher_on_a_root_in_use_is_refused_in_one_line(tmp_path):
     root = tmp_path / "runs"
     root.mkdir()
@@ -202,6 +206,7 @@ def test_a_full_disk_is_exit_1_naming_the_file_in_every_script(tmp_path, monkeyp
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py", "reproduce.py"])
 def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
     taken = tmp_path / "taken"
@@ -222,6 +227,7 @@ def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
 # --- 7. one line of error where the scripts write the error ----------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("srun") is not None, reason="Slurm is installed here")
 def test_slurm_without_slurm_is_one_line_before_anything_is_trained(tmp_path):
     done = run_script("reproduce.py", *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
@@ -291,6 +297,7 @@ gym.register("ns46/Line-v0", entry_point=Line, max_episode_steps=20)
 """
 
 
+@pytest.mark.slow
 def test_reproduce_trains_and_sweeps_a_namespaced_id_in_one_directory_per_run(tmp_path, monkeypatch):
     """`module:namespace/Env-v0` ids: the run name replaces ':' and '/' by '-', one path component."""
     (tmp_path / "newcomer46.py").write_text(NAMESPACED_MODULE)
@@ -330,6 +337,7 @@ def test_new_checkpoints_record_no_folder_of_the_machine_that_trained_them(tmp_p
     assert str(tmp_path.resolve()) not in (run_dir / "args.json").read_text()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "make,what",
     [
@@ -356,6 +364,7 @@ def bc_null_cli(*flags) -> subprocess.CompletedProcess:
                           cwd=ROOT, timeout=120, check=False)  # fmt: skip
 
 
+@pytest.mark.slow
 def test_bc_null_exits_2_with_the_reason_where_it_would_write_nothing(tmp_path):
     assert "no run directories, roots or checkpoint files given" in one_line_error(bc_null_cli())
     assert "--episode-seed must be a non-negative integer" in one_line_error(

@@ -90,6 +90,7 @@ def test_a_configuration_short_of_a_seed_in_every_cell_is_marked_against_the_oth
 # --- silent: outputs.txt names only files plot_results.py wrote ------------------------------------
 
 
+@pytest.mark.slow
 def test_a_rerun_never_deletes_a_file_named_in_outputs_txt_by_hand_or_edited_since(tmp_path, capsys):
     """A name added to outputs.txt by hand made the next plot_results.py run delete that file of the user's: the
     manifest records each output's sha256, and a rerun removes only the files that are still the bytes it wrote."""
@@ -313,6 +314,7 @@ def test_an_id_a_module_registers_is_answered_with_the_module_prefix_and_dm_cont
 # --- the README's agent snippet, and the field's habits --------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_readmes_agent_snippet_runs_from_another_folder_and_a_missing_file_says_so(tmp_path):
     """The snippet worked only from the clone's root: from another folder its relative path met "unreadable
     checkpoint (FileNotFoundError …)". It finds the agents beside the module it imports, and seeds act per call
@@ -356,6 +358,7 @@ def test_predict_is_sb3s_call_and_act_takes_a_seed_of_its_own(kind):
         agent.act(obs[0], 1.0, noise=np.zeros(3), seed=1)
 
 
+@pytest.mark.slow
 def test_compare_paper_with_one_seed_says_no_cell_is_tested_not_alpha_nan(tmp_path):
     """With one seed, compare_paper.md printed "at Holm's first step (α/4 = nan)": no Welch test is possible, and
     the report says so; with seeds enough the sentence is as before."""

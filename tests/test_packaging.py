@@ -37,6 +37,7 @@ def build_backend_here() -> None:
         pytest.skip("needs setuptools>=70 (pip install -e '.[dev]') to build the wheel without the network")
 
 
+@pytest.mark.slow
 def test_a_non_editable_install_finds_the_papers_data_from_any_folder(tmp_path):
     """`pip install .` (not -e) of a copy of the repository, then plot_results --compare-paper run as an
     installed module from a folder outside any source tree: it reads the paper's numbers from the

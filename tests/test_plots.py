@@ -255,6 +255,7 @@ def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_p
     assert "99.4%" in report or "99.3%" in report or "99.5%" in report  # the simulated null overlap rate
 
 
+@pytest.mark.slow
 def test_the_report_says_what_each_test_can_see_and_pools_a_task_with_a_bootstrap(sweep_dir, tmp_path):
     generate(sweep_dir, tmp_path, compare_paper=True)
     rows = [r for r in read_csv(tmp_path / "out" / "compare_paper.csv") if r["reference"] == "paper"]
@@ -302,6 +303,7 @@ def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
     assert "mean ± standard deviation" in (tmp_path / "out" / "compare_paper.md").read_text()
 
 
+@pytest.mark.slow
 def test_compare_paper_compares_the_papers_configurations_only_and_names_the_rest(tmp_path):
     """A reward-scaled fork's CartPole PPO (returns a tenth of the task's) was compared with the paper
     (−86.2%) and nothing named the fork: a fork, or a run with another training argument, is left out of
@@ -483,6 +485,7 @@ def test_an_env_is_tabled_by_its_action_space_not_its_name(tmp_path, env, action
     assert (tmp_path / "out" / "table_discrete.md").read_text().splitlines()[2] == "| Method | CartPole-v1 |"
 
 
+@pytest.mark.slow
 def test_a_rerun_removes_the_outputs_of_the_previous_run_it_does_not_write_again(tmp_path, monkeypatch):
     both = {("CartPole-v1", "ppo", 100000, 1.0): [270, 271, 272], ("Hopper-v4", "ppo", 200000, 1.0): [1000, 1100, 1200]}
     write_episodes(tmp_path / "both.csv", episode_rows(both))
@@ -685,6 +688,7 @@ def test_gamma_response_labels_exactly_the_swept_gammas(sweep_dir):
     assert legend_labels(fig) == ["PPO", "PGG, γ_train = 1.1"]
 
 
+@pytest.mark.slow
 def test_learning_curves_draw_few_points_and_say_so(sweep_dir, tmp_path):
     from torch.utils.tensorboard import SummaryWriter
 
@@ -739,6 +743,7 @@ def test_batched_iqm_equals_scipy_trim_mean():
     assert plots.iqm_along(*samples, axis=-1) == pytest.approx(expected)
 
 
+@pytest.mark.slow
 def test_the_performance_profile_is_drawn_from_the_iqms_normalised_scores(sweep_dir, tmp_path):
     """Beside the IQM, rliable's performance profile: at the last step, per variant and eval γ, the
     fraction of the same normalised (env, seed) scores the IQM pools above each τ."""
@@ -1008,6 +1013,7 @@ def test_compare_sweeps_errors_are_one_line(tmp_path, monkeypatch, capsys):
         assert err.count("\n") == 1 and err.startswith("error: ") and message in err, err
 
 
+@pytest.mark.slow
 def test_a_replot_into_the_same_folder_drops_the_last_plots_learning_curves(tmp_path):
     """`plot_results.py A --runs R --output X`, then `plot_results.py B --output X`: the curves of A's runs
     (here of a task B does not hold) are not B's, so the rerun removes them and its outputs.txt does not
@@ -1075,6 +1081,7 @@ def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
     assert group == {1.0: {2: 40.0, 10: 200.0}}
 
 
+@pytest.mark.slow
 def test_every_reader_of_episodes_refuses_a_cut_file(tmp_path):
     """A cell short of episodes (a cut file) is refused in one line by each reader: plot_results, the
     held-out γ, the comparison of two sweeps and the cloning pilot, which read it as whole before."""
@@ -1104,6 +1111,7 @@ def test_a_cell_with_fewer_episodes_than_the_others_is_refused(sweep_dir, tmp_pa
     )
 
 
+@pytest.mark.slow
 def test_cells_with_fewer_seeds_than_their_siblings_are_named(sweep_dir, tmp_path):
     """A file cut at a cell boundary loses the last run's later cells: they hold fewer seeds than the
     other cells of their configuration, and say so in the tables and in a printed line."""
@@ -1119,6 +1127,7 @@ def test_cells_with_fewer_seeds_than_their_siblings_are_named(sweep_dir, tmp_pat
     assert "$-86.5 \\pm 6.4$ (2 of 3 seeds)" in (tmp_path / "o" / "table_discrete.tex").read_text()
 
 
+@pytest.mark.slow
 def test_an_episodes_csv_that_differs_from_its_sweeps_record_is_refused(sweep_dir, tmp_path):
     """The sweep records what it wrote (written.csv: rows and sha256): a file cut at any line, even at a
     cell boundary that leaves every cell whole, is refused in one line."""
@@ -1132,6 +1141,7 @@ def test_an_episodes_csv_that_differs_from_its_sweeps_record_is_refused(sweep_di
                    f"{sweep_dir / 'written.csv'} records 72")  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_second_writer_into_one_output_folder_is_refused(sweep_dir, tmp_path):
     """Two plot_results.py into one --output would leave one sweep's tables beside the other's figures."""
     out = tmp_path / "o"
@@ -1172,6 +1182,7 @@ def write_run(root, name: str, seed: int, events_end: int, total: int = 4096, ch
     writer.close()
 
 
+@pytest.mark.slow
 def test_runs_with_damaged_short_or_missing_events_are_left_out_and_named(sweep_dir, tmp_path):
     """A run's curve is drawn only where its events reach its total_timesteps: events of random bytes,
     events cut short of the run's checkpoints, and an unfinished run are each named, not drawn."""

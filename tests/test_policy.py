@@ -151,6 +151,7 @@ def test_a_fork_that_edits_one_path_alone_stops_before_training_in_one_line(tmp_
     assert not list((tmp_path / "runs" / "one_path").glob(rundir.EVENTS_GLOB))  # nothing written to start again over
 
 
+@pytest.mark.slow
 def test_a_fork_that_edits_one_path_alone_exits_2_in_one_line_as_a_command(tmp_path):
     original, edit, message = ONE_PATH["rollout"]
     fork = write_fork(tmp_path / "fork", original, edit)

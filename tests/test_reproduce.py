@@ -40,6 +40,7 @@ def local_results(tmp_path_factory):
     return tmp_path / "local" / "results"
 
 
+@pytest.mark.slow
 def test_quick_preset_runs_end_to_end_locally(local_results):
     table = (local_results / "table_discrete.md").read_text()
     assert "| Method | CartPole-v1 |" in table and "| PPO |" in table and "| pgg_g1.1 |" in table
@@ -90,6 +91,7 @@ def test_a_one_seed_grid_after_a_two_seed_grid_leaves_only_its_own_agents(local_
     assert [p.name for p in (folder / two_seeds[-1].name).iterdir()] == ["notes.md"]
 
 
+@pytest.mark.slow
 def test_quick_preset_through_submitit_local_executor(local_results, tmp_path):
     assert reproduce.reproduce(tiny_args(tmp_path, "submitit", executor="submitit-local")) == 0
     results = tmp_path / "submitit" / "results"
@@ -110,6 +112,7 @@ def processes_mentioning(text: str) -> list[int]:
     return found
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(
     sys.platform != "linux", reason="children die with a SIGKILLed launcher through Linux's PR_SET_PDEATHSIG"
 )
@@ -152,6 +155,7 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
         assert (tmp_path / "killed" / "results" / name).read_text() == straight.replace("straight", "killed")
 
 
+@pytest.mark.slow
 def test_failed_run_is_reported_and_others_finish(tmp_path, monkeypatch):
     real_command = reproduce.RunSpec.command
 
@@ -173,6 +177,7 @@ def test_compile_flag_reaches_every_training_command(tmp_path):
         assert len(specs) == 4 and all(("--compile" in spec.command()) == compile_ for spec in specs)
 
 
+@pytest.mark.slow
 def test_sweeping_an_unfinished_run_is_said_with_its_last_step_and_its_trainer(tmp_path, capsys):
     args = tiny_args(tmp_path, "partial", variants=("ppo",))
     assert reproduce.reproduce(args) == 0
@@ -193,6 +198,7 @@ def test_sweeping_an_unfinished_run_is_said_with_its_last_step_and_its_trainer(t
     assert len(episodes) - 1 == (2 + 1) * 2 * 3  # s1: two checkpoints, s2: one; × γ × episodes
 
 
+@pytest.mark.slow
 def test_submitit_local_executor_works_when_launched_as_a_command(tmp_path):
     """The jobs unpickle reproduce.TrainingTask, not __main__'s, and import it from anywhere: the command
     runs from a directory that does not hold reproduce.py."""
@@ -219,6 +225,7 @@ def children_of(pid: int) -> list[int]:
     return found
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(sys.platform != "linux", reason="finds the job's task process through /proc")
 def test_preempted_submitit_job_is_requeued_and_resumes_from_its_last_checkpoint(tmp_path):
     """Slurm's preemption signal (SIGUSR2) to the job's task between checkpoints, as submitit's local
@@ -249,6 +256,7 @@ def test_preempted_submitit_job_is_requeued_and_resumes_from_its_last_checkpoint
     assert processes_mentioning(str(spec.run_dir)) == [], "the preempted task's training child outlived it"
 
 
+@pytest.mark.slow
 def test_a_job_that_fails_before_its_log_exists_is_reported_with_submitits_log(tmp_path, capsys):
     root = tmp_path / "failing" / "runs"
     root.mkdir(parents=True)
@@ -273,6 +281,7 @@ def test_the_launch_counts_trained_half_done_and_not_started_runs(tmp_path):
     )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("flags", "message"),
     [
@@ -330,6 +339,7 @@ def test_a_second_launcher_into_the_same_results_is_refused_before_training(tmp_
     assert not any(Path(args.root).glob("CartPole-v1__*")), "the refused launcher trained"
 
 
+@pytest.mark.slow
 def test_help_ends_the_variant_list_before_the_next_sentence():
     done = subprocess.run([sys.executable, str(ROOT / "reproduce.py"), "--help"], capture_output=True, text=True,
                           timeout=120, env={**os.environ, "COLUMNS": "200"}, check=False)  # fmt: skip
@@ -394,6 +404,7 @@ def test_the_committed_agents_were_trained_by_the_commands_the_grid_gives_today(
         assert ["python", Path(spec.command()[1]).name, *spec.command()[2:]] == words
 
 
+@pytest.mark.slow
 def test_a_variant_added_to_paper_py_as_flags_alone_is_launched_under_its_variant_id(tmp_path):
     """A variant written into paper.BEYOND_VARIANTS as its flags, with no id anywhere, is a choice of --variants
     under the id identity.variant_id gives a run of those flags, and the grid names and trains its runs so."""
@@ -434,6 +445,7 @@ def test_a_variant_that_its_flags_name_otherwise_on_a_task_is_refused_there(monk
         reproduce.grid_variants.cache_clear()  # named again from paper.py's own variants
 
 
+@pytest.mark.slow
 def test_a_grid_variant_that_differs_from_another_by_any_flag_gets_an_id_of_its_own(tmp_path):
     """A variant that its variant id alone would confuse with the paper's PGG (it adds --learning-rate) is named by
     the id and the argument its flags set otherwise, and the grid launches it so; a variant that trains the same runs

@@ -240,6 +240,7 @@ def test_a_run_directory_in_use_is_refused(tmp_path):
 # --- interaction ---------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_ctrl_c_exits_130_with_one_line_saying_what_is_kept(tmp_path):
     script = ROOT / "ppo_pgg_discrete.py"
     flags = ["--output-dir", str(tmp_path), "--run-name", "stopped", "--checkpoint-interval", "2048"]
@@ -260,6 +261,7 @@ def test_ctrl_c_exits_130_with_one_line_saying_what_is_kept(tmp_path):
     assert "checkpoints up to step_0000" in lines[0] and "--resume" in lines[0]
 
 
+@pytest.mark.slow
 def test_progress_is_a_live_bar_in_a_terminal_and_plain_lines_in_a_log(tmp_path, capsys):
     report = progress.Progress("training", 1000, 0, unit="steps", interval=0.0)
     report.update(500, "123 SPS  return(last 20) 15.0")
@@ -533,6 +535,7 @@ def test_resuming_with_capture_video_switched_on_still_ends_on_the_uninterrupted
 # --- both scripts --------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_compile_flag_trains_through_the_compiled_loss(kind, tmp_path, compiled_calls):
     module = SCRIPTS[kind]
@@ -706,6 +709,7 @@ def run_fork(script: Path, *flags) -> subprocess.CompletedProcess:
 TINY = ["--total-timesteps", "512", "--num-envs", "1", "--num-steps", "128", "--checkpoint-interval", "256"]
 
 
+@pytest.mark.slow
 def test_a_fork_and_each_value_of_its_new_argument_get_a_run_directory_of_their_own(tmp_path):
     script, output = fork(tmp_path / "elsewhere"), tmp_path / "runs"
     for value in ("0.5", "0.7"):
@@ -723,6 +727,7 @@ def test_a_fork_and_each_value_of_its_new_argument_get_a_run_directory_of_their_
     assert checkpoint(output / "CartPole-v1__ppo_pgg__g1__p0__s1", 512)["args"]["exp_name"] == "ppo_pgg_discrete__ppo"
 
 
+@pytest.mark.slow
 def test_resume_refuses_a_run_another_script_trained_and_says_when_the_script_changed(tmp_path):
     script, output = fork(tmp_path / "elsewhere"), tmp_path / "runs"
     common = [*TINY, "--output-dir", str(output), "--run-name", "shared"]

@@ -329,6 +329,7 @@ def test_bad_input_exits_with_one_line(runs, tmp_path, argv, message, monkeypatc
         assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_bad_input_in_a_fresh_process_is_one_line_without_traceback(runs, tmp_path):
     proc = subprocess.run(
         [*SCRIPT, str(runs / "discrete"), "--gammas", "-1", "--output", str(tmp_path / "o")],
@@ -576,6 +577,7 @@ def alive(pid: int) -> bool:
         return False
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("workers", [1, 2])
 def test_ctrl_c_exits_130_with_one_line_and_keeps_finished_cells(long_sweep, tmp_path, workers):
     output = tmp_path / "out"
@@ -603,6 +605,7 @@ def test_stopping_the_pool_ends_its_manager_thread_before_returning():
         assert not any(process.is_alive() for process in processes.values())
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_leaves_no_worker_and_no_lock(long_sweep, tmp_path):
     output = tmp_path / "out"
     proc = long_sweep(output, workers=2)

@@ -91,6 +91,7 @@ def test_a_per_episode_column_with_a_name_of_the_sweeps_is_refused_in_one_line(t
     assert reasons == {expected}
 
 
+@pytest.mark.slow
 def test_an_edit_to_a_project_module_that_act_calls_re_evaluates_the_cells(tmp_path):
     """In a copy of the project: a rerun reuses every cell; after an edit to the module of guided_actions
     (which Agent.act calls, and the sweep imports nowhere itself), a rerun evaluates every cell again."""
