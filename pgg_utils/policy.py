@@ -169,9 +169,21 @@ def path_error(script, agent, args, raw_obs: np.ndarray, normalise, noise: np.nd
             for guidance, loss_guidance in ((PROBE_GUIDANCE, PROBE_GUIDANCE), (1.0, None)):
                 if error := probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidance):
                     return error
+    except PathError as e:  # a path that cannot even run on the probe batch
+        return str(e)
     finally:
         torch.set_rng_state(rng_state)
     return None
+
+
+def running(path: str, call):
+    """`call()`, or PathError naming `path` and the first line of what it raised: a path that cannot run on the
+    probe batch (a distribution the fast path does not build, an observation of another shape) is one line."""
+    try:
+        return call()
+    except Exception as e:
+        first = str(e).strip().splitlines()[0] if str(e).strip() else ""
+        raise PathError(f"{path} raised {type(e).__name__} on a probe batch: {first}") from e
 
 
 def randomised(agent):
@@ -210,8 +222,9 @@ def probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidanc
     obs = normalise(raw_obs)
     at = f"at guidance {guidance:g} on a probe batch"
     with torch.no_grad():
-        defined = agent.policy(torch.from_numpy(obs), loss_guidance)
-        actions, log_probs, _ = script.FastPolicy(agent, guidance).act(obs, noise)
+        defined = running("Agent.policy (the loss's)", lambda: agent.policy(torch.from_numpy(obs), loss_guidance))
+        actions, log_probs, _ = running("the rollouts (FastPolicy.act)",
+                                        lambda: script.FastPolicy(agent, guidance).act(obs, noise))  # fmt: skip
         expected = defined.sample(torch.from_numpy(noise))
         if not close(actions, expected):
             return f"the rollouts' actions (FastPolicy.act) differ from guided_policy's samples {at}"
@@ -221,7 +234,8 @@ def probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidanc
     batch = {"obs": torch.from_numpy(obs), "actions": torch.from_numpy(actions),
              "logprobs": torch.from_numpy(np.asarray(log_probs, np.float32)), "advantages": torch.ones(rows),
              "returns": torch.zeros(rows), "values": torch.zeros(rows)}  # fmt: skip
-    _, stats = script.minibatch_loss(agent, batch, torch.arange(rows), None, loss_guidance, args)
+    _, stats = running("minibatch_loss", lambda: script.minibatch_loss(agent, batch, torch.arange(rows), None,
+                                                                       loss_guidance, args))  # fmt: skip
     if not stats["losses/approx_kl"].item() <= PROBE_MAX_KL:
         return (f"minibatch_loss's log-probabilities of the rollouts' actions differ from the rollouts' own {at} "
                 f"(the first ratio is not 1: approx_kl {stats['losses/approx_kl'].item():.3g})")  # fmt: skip
@@ -229,7 +243,8 @@ def probe(script, agent, args, raw_obs, normalise, noise, guidance, loss_guidanc
     bounds = getattr(agent, "action_bounds", None)
     bounded = (lambda a: np.clip(as_array(a), *bounds)) if bounds is not None else as_array
     with torch.no_grad():
-        if not close(agent.act(raw_obs, per_row, deterministic=True), bounded(defined.mode())):
+        mode = running("Agent.act", lambda: agent.act(raw_obs, per_row, deterministic=True))
+        if not close(mode, bounded(defined.mode())):
             return f"Agent.act's deterministic actions differ from guided_policy's mode {at}"
         if not close(agent.act(raw_obs, per_row, noise=noise), bounded(expected)):
             return f"Agent.act's sampled actions differ from guided_policy's samples with the same noise {at}"

@@ -144,3 +144,25 @@ def test_act_that_goes_stale_as_the_agent_trains_stops_at_the_next_checkpoint(tm
     line = one_line_error(done, 1)
     assert line.startswith("error: at step 1,024: Agent.act") and "checkpoints up to step_000000512.pt are kept" in line
     assert [p.name for p in (tmp_path / "runs").glob("*/checkpoints/*.pt")] == ["step_000000512.pt"]
+
+
+# A distribution the fork builds in Agent.branches and reads in guided_policy (here a σ floor the branches carry), with
+# the fast path left as it was: the rollouts' Gaussians lack it. Before, a traceback through the probe.
+FLOORED = (
+    ("class Agent(nn.Module):",
+     ("class Floored(Gaussian):\n"
+      "    floor = 0.1\n\n\n"
+      "class Agent(nn.Module):")),
+    ("        return Gaussian(mean_cond, self.actor_logstd), Gaussian(mean_null, self.null_logstd())  # PGG\n",
+     "        return Floored(mean_cond, self.actor_logstd), Floored(mean_null, self.null_logstd())  # PGG\n"),
+    ("    return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std)  # PGG\n",
+     "    return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std + cond.floor)  # PGG\n"),
+)  # fmt: skip
+
+
+def test_a_path_that_cannot_run_on_the_probe_batch_is_named_in_one_line(tmp_path):
+    """A fork whose distribution the fast path does not build raised AttributeError through the probe (a traceback);
+    now the path that raised is named with the error's first line, exit 2, before training."""
+    done = train_fork(fork(tmp_path, *FLOORED), tmp_path, "--guidance", "2")
+    line = one_line_error(done, 2)
+    assert "the rollouts (FastPolicy.act) raised AttributeError on a probe batch" in line and "floor" in line
