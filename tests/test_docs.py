@@ -191,6 +191,11 @@ BEYOND_SOURCES = [
     (CMD, DROP17, DROP_G1, "tracking error change at γ 1.5"), (CMD, DROP17, DROP_G1, "tracking error p Holm at γ 1.5"),
     (CMD, DROP17, DROP_G1, "tracking error middle change at γ 1.5"),
     (CMD, DROP17, DROP_G1, "tracking error middle p Holm at γ 1.5"),
+    None, None, ("Reacher-v4", "pgg_drop0.1_goal", "condition dropout", "final distance at γ 1"),  # the goal dropped
+    ("Reacher-v4", "pgg_g1.1_goal", "condition dropout", "final distance at γ 1"),
+    ("Reacher-v4", "pgg_g1.1", "condition dropout", "final distance at γ 1"), None, None, None,
+    ("Reacher-v4", "pgg_drop0.1_goal", DROP_G1, "final distance change at γ 1.5"), None,
+    ("Reacher-v4", "pgg_drop0.1_goal", DROP_G1, "final distance p Holm at γ 1.5"),
 ]  # fmt: skip
 
 

@@ -392,7 +392,7 @@ def test_the_committed_agents_were_trained_by_the_commands_the_grid_gives_today(
     readmes = sorted((ROOT / "results").rglob("agents/README.md"))
     rows = [line.split(" | ") for readme in readmes for line in readme.read_text().splitlines()
             if line.startswith("| ") and "`python " in line]  # fmt: skip
-    assert {row[2] for row in rows} <= set(GRID_VARIANTS)
+    assert {row[2] for row in rows} == set(GRID_VARIANTS)
     for row in rows:
         name, env_id, variant, seed, command = row[0].removeprefix("| "), row[1], row[2], int(row[3]), row[5]
         words = command.strip("` |").split()
