@@ -576,6 +576,8 @@ def train(args: Args, run: runs.Run) -> None:
         refuse(error, envs)
     shapes = checkpoint_shapes(task)
     task.close()
+    if error := spaces.observation_shape_error(args.env_id, envs.single_observation_space):
+        refuse(error, envs)
     if len(envs.single_action_space.shape) != 1:
         refuse(f"{args.env_id}'s actions have shape {envs.single_action_space.shape}; this script acts with a "
                "vector (a 1-D Box): reshape them in make_env", envs)  # fmt: skip

@@ -505,6 +505,8 @@ def train(args: Args, run: runs.Run) -> None:
         refuse(error, envs)
     shapes = checkpoint_shapes(task)
     task.close()
+    if error := spaces.observation_shape_error(args.env_id, envs.single_observation_space):
+        refuse(error, envs)
     if (start := int(envs.single_action_space.start)) != 0:
         refuse(f"{args.env_id}'s actions start at {start}; this script acts with 0..n-1: shift them in make_env "
                "(gymnasium.wrappers.TransformAction) or start the space at 0", envs)  # fmt: skip

@@ -61,3 +61,13 @@ def vector_mismatch(task: gym.Env, observation_space: gym.Space, action_space: g
     if clipped:
         contract["action"] = {key: value for key, value in contract["action"].items() if key not in ("low", "high")}
     return mismatch(contract, observation_space, action_space)
+
+
+def observation_shape_error(env_id: str, observation_space: gym.Space) -> str | None:
+    """What training says of observations the scripts' networks cannot take (they read a vector, a 1-D Box: a frame
+    stack of vectors is (k, n)), or None."""
+    shape = getattr(observation_space, "shape", None)
+    if shape is not None and len(shape) == 1:
+        return None
+    return (f"{env_id}'s observations have shape {shape} as make_env makes them; this script's networks take a vector "
+            "(a 1-D Box): flatten them in make_env (gymnasium.wrappers.FlattenObservation, after a frame stack)")  # fmt: skip

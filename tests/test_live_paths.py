@@ -166,3 +166,17 @@ def test_a_path_that_cannot_run_on_the_probe_batch_is_named_in_one_line(tmp_path
     done = train_fork(fork(tmp_path, *FLOORED), tmp_path, "--guidance", "2")
     line = one_line_error(done, 2)
     assert "the rollouts (FastPolicy.act) raised AttributeError on a probe batch" in line and "floor" in line
+
+
+def test_observations_the_networks_cannot_take_are_refused_in_one_line(tmp_path):
+    """A frame stack without a flatten in make_env gives (4, 3) observations: a traceback from the normaliser in the
+    start-up probe before; now one line naming the shape and the flatten, exit 2."""
+    stacked = (
+        (
+            "        return env\n\n    return thunk\n",
+            "        return gym.wrappers.FrameStackObservation(env, 4)\n\n    return thunk\n",
+        ),
+    )
+    done = train_fork(fork(tmp_path, *stacked), tmp_path)
+    line = one_line_error(done, 2)
+    assert "observations have shape (4, 3)" in line and "FlattenObservation" in line
