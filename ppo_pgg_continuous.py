@@ -571,12 +571,8 @@ def train(args: Args, run: runs.Run) -> None:
     envs = make_vector_env(
         args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
     )
-    task = make_env(args.env_id)()  # as the sweep makes it: the checkpoints record its spaces
-    if error := tasks.vector_env_error(envs, task):
-        refuse(error, envs)
-    shapes = checkpoint_shapes(task)
-    task.close()
-    if error := spaces.observation_shape_error(args.env_id, envs.single_observation_space):
+    shapes, error = tasks.trained_task(sys.modules[__name__], args.env_id, envs)  # make_env's task, as swept
+    if error:
         refuse(error, envs)
     if len(envs.single_action_space.shape) != 1:
         refuse(f"{args.env_id}'s actions have shape {envs.single_action_space.shape}; this script acts with a "

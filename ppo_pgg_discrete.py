@@ -500,12 +500,8 @@ def train(args: Args, run: runs.Run) -> None:
     training_state.seed_everything(args)
 
     envs = make_vector_env(args.env_id, args.num_envs, args.seed, run.video_dir(resumed))
-    task = make_env(args.env_id)()  # as the sweep makes it: the checkpoints record its spaces
-    if error := tasks.vector_env_error(envs, task):
-        refuse(error, envs)
-    shapes = checkpoint_shapes(task)
-    task.close()
-    if error := spaces.observation_shape_error(args.env_id, envs.single_observation_space):
+    shapes, error = tasks.trained_task(sys.modules[__name__], args.env_id, envs)  # make_env's task, as swept
+    if error:
         refuse(error, envs)
     if (start := int(envs.single_action_space.start)) != 0:
         refuse(f"{args.env_id}'s actions start at {start}; this script acts with 0..n-1: shift them in make_env "

@@ -1,7 +1,7 @@
 """The task as the training scripts and the sweep make it, written once: gym.make's env with its own returns recorded
 directly on it (`task_env`, on which each script's `make_env` builds), the episodes a vector step ended
-(`ended_episodes`), and what a script's vector env must be to train, checkpoint, resume and be swept
-(`vector_env_error`)."""
+(`ended_episodes`), what a script's vector env must be to train, checkpoint, resume and be swept
+(`vector_env_error`), and the task's shapes a checkpoint records (`trained_task`)."""
 
 import gymnasium as gym
 import numpy as np
@@ -75,3 +75,15 @@ def vector_env_error(envs, task: gym.Env) -> str | None:
         return (f"make_vector_env's sub-envs act in another task than make_env makes ({error}): the checkpoints "
                 "record make_env's, which the sweep evaluates; put the wrapper in make_env")  # fmt: skip
     return None
+
+
+def trained_task(script, env_id: str, envs) -> tuple[dict | None, str | None]:
+    """(the shapes a checkpoint records, `script.checkpoint_shapes` of the env `script.make_env` makes, as the sweep
+    makes it; None, the one line that refuses training): a vector env that cannot train, checkpoint, resume and be
+    swept, or observations the scripts' networks cannot take, is refused before the shapes are read."""
+    task = script.make_env(env_id)()
+    try:
+        error = vector_env_error(envs, task) or spaces.observation_shape_error(env_id, envs.single_observation_space)
+        return (None, error) if error else (script.checkpoint_shapes(task), None)
+    finally:
+        task.close()
