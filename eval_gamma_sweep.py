@@ -355,7 +355,7 @@ def evaluate_cell(policy: GuidedPolicy, ckpt, gamma: float, episodes: int, eval_
     where the task raises or returns a NaN or an infinity.
 
     The one loop that plays evaluation episodes: the sweep's cells, --video, and, through `hooks`,
-    paper_study/goal_distance.py, paper_study/command_tracking.py and pgg_utils/bc_null.py (which acts with
+    beyond/goal_distance.py, beyond/command_tracking.py and pgg_utils/bc_null.py (which acts with
     a policy of its own). An episode that ends keeps its row (holding its last observation) until the whole
     cell is done, so every policy forward of the cell has the same shape, cell_rows(episodes) rows, from the
     first step to the last: what a cell computes is a function of the checkpoint, γ and the settings alone

@@ -1,7 +1,7 @@
 """An installed copy's sweep against the clone's, on the same checkpoints: wall time of the whole command, in turns.
 
-    python benchmarks/bench_installed_sweep.py                 # the working tree
-    python benchmarks/bench_installed_sweep.py --revision b37a440 --rounds 1
+    python -m benchmarks.bench_installed_sweep                 # the working tree
+    python -m benchmarks.bench_installed_sweep --revision b37a440 --rounds 1
 
 The revision's files (results/ and benchmarks/ left out) are exported into a scratch folder: that export is the
 clone, run as `python <clone>/eval_gamma_sweep.py`. It is also installed, non-editable (`pip install --no-deps

@@ -1,7 +1,7 @@
 """Training and sweep throughput, measured in one run on one machine, with the ratios that matter.
 
-    python benchmarks/bench_speed.py                 # about 8 minutes on 2 cores
-    python benchmarks/bench_speed.py --repeats 2     # quicker, noisier
+    python -m benchmarks.bench_speed                 # about 8 minutes on 2 cores
+    python -m benchmarks.bench_speed --repeats 2     # quicker, noisier
 
 Prints, for CartPole-v1 (discrete script) and Hopper-v4 (continuous script):
   - raw env stepping: one gym.make env, and the training script's own vector env, random actions;
@@ -25,7 +25,7 @@ The speed-up over CleanRL is only meaningful measured in the same run: this mach
 varies up to 2x with the load of its host. Given a CleanRL checkout and a Python that runs it
 (gymnasium 0.29), CleanRL's ppo.py and ppo_continuous_action.py join the alternation, one thread each:
 
-    python benchmarks/bench_speed.py --cleanrl-dir ~/cleanrl/cleanrl --cleanrl-python ~/cleanrl-venv/bin/python
+    python -m benchmarks.bench_speed --cleanrl-dir ~/cleanrl/cleanrl --cleanrl-python ~/cleanrl-venv/bin/python
 
 Without it, the speed-up is taken against the figures the issue quotes for this machine class
 (ppo.py 3.4k-4.0k SPS on CartPole-v1, ppo_continuous_action.py about 780 SPS on Hopper-v4).
@@ -45,7 +45,6 @@ import numpy as np
 import torch
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete

@@ -1,9 +1,9 @@
 """Our PPO (`--guidance 1 --cond-dropout 0`: CleanRL's algorithm and defaults) against CleanRL's own `ppo.py` or
 `ppo_continuous_action.py`, each run in its own environment, over several seeds.
 
-    python benchmarks/compare_cleanrl.py --env-id CartPole-v1 --seeds 8 --total-timesteps 500000 \\
+    python -m benchmarks.compare_cleanrl --env-id CartPole-v1 --seeds 8 --total-timesteps 500000 \\
         --cleanrl-dir ~/cleanrl/cleanrl --cleanrl-python ~/cleanrl-venv/bin/python --workers 2
-    python benchmarks/compare_cleanrl.py --env-id CartPole-v1 --analyse-only     # the saved runs again
+    python -m benchmarks.compare_cleanrl --env-id CartPole-v1 --analyse-only     # the saved runs again
 
 Both implementations run as child processes through their command lines, so nothing here depends on
 either's internals: one thread each, at the lowest priority, `--workers` at a time, the two runs of a
@@ -47,7 +47,6 @@ from scipy import stats
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT))
 from paper_study.paper import action_kind
 from paper_study.stats import ALPHA, welch
 from pgg_utils.files import write_atomic

@@ -2,9 +2,9 @@
 over several seeds: the check behind an optimisation that changes float rounding or the sampling
 stream, where bit-for-bit equality cannot hold and statistical equivalence is what is claimed.
 
-    python benchmarks/compare_learning_curves.py --rev 406cc87~1 --env-id CartPole-v1 --seeds 8
-    python benchmarks/compare_learning_curves.py --rev 406cc87~1 --env-id Hopper-v4 --seeds 4 --total-timesteps 100000
-    python benchmarks/compare_learning_curves.py --rev HEAD --compile --seeds 8   # --compile against eager
+    python -m benchmarks.compare_learning_curves --rev 406cc87~1 --env-id CartPole-v1 --seeds 8
+    python -m benchmarks.compare_learning_curves --rev 406cc87~1 --env-id Hopper-v4 --seeds 4 --total-timesteps 100000
+    python -m benchmarks.compare_learning_curves --rev HEAD --compile --seeds 8   # --compile against eager
 
 Each run trains at `--guidance`; its score is the mean episodic return over the whole run (the area
 under the learning curve) and over the last tenth of its episodes. Prints both per revision, with
@@ -23,8 +23,7 @@ from scipy import stats
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "benchmarks"))
-from compare_revisions import CHILD_ENV, WORKTREE, export
+from benchmarks.compare_revisions import CHILD_ENV, WORKTREE, export
 
 
 @dataclass

@@ -1,7 +1,7 @@
 """Runs a fixed set of tiny configurations at two revisions on this machine and compares them bit for bit.
 
-    python benchmarks/compare_revisions.py 42843cd          # that commit against the working tree
-    python benchmarks/compare_revisions.py 42843cd HEAD     # two commits
+    python -m benchmarks.compare_revisions 42843cd          # that commit against the working tree
+    python -m benchmarks.compare_revisions 42843cd HEAD     # two commits
 
 A refactor that should change no number is proven by it. Each revision is exported (`git archive`,
 or the working tree as it is) into a scratch folder and runs, with this Python and one thread:
@@ -10,8 +10,8 @@ or the working tree as it is) into a scratch folder and runs, with this Python a
   resumed (`--resume`) to the end;
 - the sweep of one discrete and one continuous checkpoint (episodes.csv, summary.csv);
 - the quick preset at fewer steps and episodes (`reproduce.py --preset quick ...`): its tables;
-- the paper study's own episode tools on committed agents, each a subset of its committed output: goal
-  distances (paper_study/goal_distance.py), command tracking (paper_study/command_tracking.py) and
+- the study's own episode tools on committed agents, each a subset of its committed output: goal
+  distances (beyond/goal_distance.py), command tracking (beyond/command_tracking.py) and
   behaviour-cloned nulls (pgg_utils/bc_null.py), whose fitted checkpoints record the code that fitted them
   (`null_fit.code`: its sha1s differ wherever that code does).
 
@@ -63,14 +63,14 @@ QUICK = ["reproduce.py", "--preset", "quick", "--total-timesteps", "8192", "--ch
          "--episodes", "4", "--workers", "1"]  # fmt: skip
 AGENTS = "results/beyond/{}/agents/{}"
 BEYOND = {
-    "goal_distance": ["paper_study/goal_distance.py", AGENTS.format("Reacher-v4", "Reacher-v4__pgg_g1.1_goal__s1"),
+    "goal_distance": ["beyond/goal_distance.py", AGENTS.format("Reacher-v4", "Reacher-v4__pgg_g1.1_goal__s1"),
                       "results/continuous/agents/Pusher-v4__pgg_g1.1__s1", "--steps", "1000000", "--gammas", "1", "1.3",
                       "--output", "out/goal_distance.csv"],
-    "command_tracking": ["paper_study/command_tracking.py",
+    "command_tracking": ["beyond/command_tracking.py",
                          AGENTS.format("command", "paper_study.cheetah_velocity-HalfCheetahVelocity-v0__pgg_g1.1__s1"),
                          "--steps", "1000000", "--gammas", "1.5", "--commands", "0", "2.5",
                          "--output", "out/tracking.csv"],
-    "bc_null": ["-m", "pgg_utils.bc_null", "results/discrete/agents/CartPole-v1__ppo__s1",
+    "bc_null": ["pgg_utils.bc_null", "results/discrete/agents/CartPole-v1__ppo__s1",
                 "results/continuous/agents/Hopper-v4__pgg_g1.1__s2", "--steps", "500000", "1000000",
                 "--output", "out/bc_null"],
 }  # fmt: skip
@@ -150,8 +150,16 @@ def run_all(tree: Path, skip_quick: bool, skip_beyond: bool) -> None:
         if not skip_quick:
             run(tree, [*QUICK, "--root", "out/quick_runs", "--results", "out/quick_results"], log)
         if not skip_beyond:
-            for command in BEYOND.values():
-                run(tree, command, log)
+            for module, *options in BEYOND.values():
+                run(tree, [*beyond_entry(tree, module), *options], log)
+
+
+def beyond_entry(tree: Path, module: str) -> list[str]:
+    """How `tree` runs a study module: as a module, or, in revisions before beyond/ (the study's tools lay in
+    paper_study/ and ran as scripts), by its old path."""
+    if (tree / (module.replace(".", "/") + ".py")).exists():
+        return ["-m", module]
+    return [module.replace("beyond.", "paper_study/") + ".py"]
 
 
 def timed_run(tree: Path, command: list[str]) -> float:

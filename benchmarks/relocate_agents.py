@@ -1,8 +1,8 @@
 """Rewrites shipped agents' metadata so that they name no folder of the machine that trained them, and proves
 that nothing else changed (issue 51).
 
-    python benchmarks/relocate_agents.py results              # rewrite, then compare every file with git HEAD's
-    python benchmarks/relocate_agents.py results --check      # compare only
+    python -m benchmarks.relocate_agents results              # rewrite, then compare every file with git HEAD's
+    python -m benchmarks.relocate_agents results --check      # compare only
 
 Checkpoints written since 2026-12-05 record `args.output_dir` relative to their run directory ("..") and the
 run's name (`run`), so a copied checkpoint keeps both. The agents shipped before recorded the absolute output
@@ -23,11 +23,7 @@ from pathlib import Path
 import torch
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from compare_revisions import compare_values
-
+from benchmarks.compare_revisions import compare_values
 from pgg_utils.checkpoints import checkpoint_bytes, read_checkpoint_file
 from pgg_utils.files import write_atomic
 

@@ -2,7 +2,7 @@
 checkpoint step, eval γ, policy, null branch and episode seed, and every field that both record is
 compared as text, so a return equal to the last bit is equal:
 
-    python benchmarks/same_episodes.py results/continuous/episodes.csv runs/sweeps/check/episodes.csv
+    python -m benchmarks.same_episodes results/continuous/episodes.csv runs/sweeps/check/episodes.csv
 
 This is how a retrained run is shown to be the table's run bit for bit: identical weights give identical
 episodes in every cell, and weights that differ anywhere change the sampled actions of nearly every
@@ -17,7 +17,6 @@ from pathlib import Path
 
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pgg_utils.files import InputError, one_line_errors, read_csv
 
 KEY = ("run", "step", "eval_guidance", "policy", "null_branch", "episode_seed")

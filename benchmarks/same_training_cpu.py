@@ -1,7 +1,7 @@
 """Does this CPU train as the one that trained a shipped agent did? Retrains the agent's run from its
 recorded arguments, as reproduce.py trains it, and compares the weights at every step mark bit for bit:
 
-    python benchmarks/same_training_cpu.py results/discrete/agents/CartPole-v1__ppo__s1
+    python -m benchmarks.same_training_cpu results/discrete/agents/CartPole-v1__ppo__s1
 
 (CartPole-v1 PPO seed 1, 500k steps with --compile: about 2 min on 2 cores.) The same code and
 software stack train different weights on different CPUs while their sweeps of one checkpoint agree
@@ -17,7 +17,6 @@ from pathlib import Path
 import torch
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import reproduce
 from pgg_utils import checkpoints
 from pgg_utils.files import InputError, one_line_errors

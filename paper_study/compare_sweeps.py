@@ -1,7 +1,7 @@
 """Two sweeps of one grid, cell by cell: the same configurations trained on two software stacks
 (MuJoCo versions, machines) or at two code revisions. It is the cross-stack check of the results:
 
-    python paper_study/compare_sweeps.py results/continuous/episodes.csv \\
+    python -m paper_study.compare_sweeps results/continuous/episodes.csv \\
         results/continuous_device/episodes.csv --labels "MuJoCo 2.3.7 (table)" "MuJoCo 3.1.6" \\
         --output results/continuous_device/compare_table.md
 
@@ -13,7 +13,6 @@ seeds are not paired: seed 1 on two stacks is two unrelated runs.
 """
 
 import math
-import sys
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,7 +20,6 @@ from pathlib import Path
 import numpy as np
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from paper_study.agreement import compare_row, fmt, fmt_p, p_is, step_label
 from paper_study.paper import paper_name, variant_rank
 from paper_study.stats import ALPHA, correct_family, sign_test

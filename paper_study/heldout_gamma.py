@@ -4,7 +4,7 @@ is biased upward even where γ changes nothing. Here the choice and the report u
 the same checkpoints (paper_study.selection):
 
     python eval_gamma_sweep.py RUNS --eval-seed 20000 --output runs/sweeps/fresh   # needs the checkpoints
-    python paper_study/heldout_gamma.py results/discrete/episodes.csv runs/sweeps/fresh/episodes.csv \\
+    python -m paper_study.heldout_gamma results/discrete/episodes.csv runs/sweeps/fresh/episodes.csv \\
         --output runs/heldout/discrete
 
 The first sweep selects γ per (env, configuration, step); the second, swept from the same run
@@ -22,13 +22,11 @@ Writes into --output, atomically, and prints each path:
 """
 
 import math
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.paper import paper_name, variant_rank
 from paper_study.selection import BASELINE_GAMMA, GROUP_COLUMNS, INCOMPLETE, TESTED, held_out, summary_by_env

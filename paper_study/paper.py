@@ -33,7 +33,7 @@ BEYOND_VARIANTS = (
     ("--guidance", "1.1", "--null-dims", "{goal}"),
     # the unconditional branch clones the rollout's actions, the null embedding alone (results/beyond/bc_train's pilot)
     ("--guidance", "1.1", "--null-bc-coef", "0.1"),
-    # the null on the command of paper_study/cheetah_velocity.py (its COMMAND_INDEX, 17): π(a|s, ∅) cannot read the
+    # the null on the command of paper_study/cheetah_velocity/ (its COMMAND_INDEX, 17): π(a|s, ∅) cannot read the
     # command, but trained without dropout it is the policy at one learned pseudo-command, not a command-agnostic
     # one (results/beyond/command)
     ("--guidance", "1.1", "--null-dims", "17"),

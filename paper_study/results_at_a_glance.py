@@ -1,7 +1,7 @@
 """The front page's "results at a glance": one row per task, from the committed reports alone.
 
-    python paper_study/results_at_a_glance.py                                  # print the table
-    python paper_study/results_at_a_glance.py --output results/at_a_glance.md  # and write it
+    python -m paper_study.results_at_a_glance                                  # print the table
+    python -m paper_study.results_at_a_glance --output results/at_a_glance.md  # and write it
 
 Per task: the verdict against the paper from `compare_paper_tasks.csv` (the median relative gap
 (ours − paper) / |paper| over the task's cells, with its bootstrap 95% interval over our seeds: below

@@ -1,4 +1,5 @@
 import csv
+import itertools
 import json
 import subprocess
 import sys
@@ -10,14 +11,8 @@ import torch
 from conftest import ROOT
 
 import ppo_pgg_discrete as pgg
+from benchmarks import bench_speed, compare_cleanrl
 from pgg_utils import checkpoints, runs
-
-sys.path.insert(0, str(ROOT / "benchmarks"))
-sys.path.insert(0, str(ROOT / "paper_study"))
-import itertools
-
-import bench_speed
-import compare_cleanrl
 
 
 def tiny_run(guidance: float, seed: int = 1) -> pgg.Args:
@@ -70,8 +65,8 @@ def test_sweep_checkpoints_are_matched_to_their_env_and_bad_ones_are_one_line_of
     not_a_checkpoint = tmp_path / "notes.txt"
     not_a_checkpoint.write_text("not a checkpoint")
     out = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "bench_speed.py"), "--sweep-checkpoints", str(not_a_checkpoint)],
-        capture_output=True, text=True,
+        [sys.executable, "-m", "benchmarks.bench_speed", "--sweep-checkpoints", str(not_a_checkpoint)],
+        capture_output=True, text=True, cwd=ROOT,
     )  # fmt: skip
     assert out.returncode != 0
     assert out.stderr.startswith("error: --sweep-checkpoints") and len(out.stderr.strip().splitlines()) == 1
@@ -144,16 +139,16 @@ def test_parity_rerun_trains_only_the_runs_not_saved(tmp_path, monkeypatch):
 def test_parity_without_cleanrl_python_is_one_line_of_error(tmp_path):
     (tmp_path / "ppo.py").write_text("")
     out = subprocess.run(
-        [sys.executable, str(ROOT / "benchmarks" / "compare_cleanrl.py"), "--env-id", "CartPole-v1",
+        [sys.executable, "-m", "benchmarks.compare_cleanrl", "--env-id", "CartPole-v1",
          "--cleanrl-dir", str(tmp_path), "--cleanrl-python", str(tmp_path / "no-python"), "--output", str(tmp_path)],
-        capture_output=True, text=True,
+        capture_output=True, text=True, cwd=ROOT,
     )  # fmt: skip
     assert out.returncode == 2
     assert out.stderr == f"error: --cleanrl-python {tmp_path / 'no-python'} is not an executable\n"
 
 
 def test_same_training_cpu_tells_bit_identical_weights_from_a_difference_of_one_ulp(tmp_path):
-    import same_training_cpu
+    from benchmarks import same_training_cpu
 
     shipped = ROOT / "tests" / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
     ckpt = checkpoints.read_checkpoint_file(shipped)
@@ -173,7 +168,7 @@ def test_same_training_cpu_tells_bit_identical_weights_from_a_difference_of_one_
 def test_same_episodes_finds_a_return_one_ulp_off_a_missing_episode_and_skips_unrecorded_columns(tmp_path):
     import math
 
-    import same_episodes
+    from benchmarks import same_episodes
 
     columns = ["run", "step", "eval_guidance", "policy", "null_branch", "episode_seed", "return", "length", "torch"]
     table = [dict(zip(columns, ["Hopper-v4__ppo__s1", "200000", "1.0", "sample", "learned", str(10000 + k),
@@ -230,7 +225,7 @@ def write_rows(path, rows):
 
 
 def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_path):
-    import beyond_report
+    from beyond import report as beyond_report
 
     baseline = {200_000: [1000, 1100, 1200, 1300, 1400], 1_000_000: [2000, 2100, 2200, 2300, 2400]}
     collapsing = {200_000: [1000, 1100, 1200, 1300, 3000], 1_000_000: [2000, 2100, 2200, 2300, 1000]}
@@ -294,8 +289,9 @@ def test_beyond_report_tests_each_new_variant_against_the_tables_baselines(tmp_p
 def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the_baselines():
     """Seeds of different shapes, a best γ inside the swept range, and two baselines: each fall is the seed's
     own (largest γ − best γ of the mean) / best, Welch's unequal-variance p as scipy gives it, Holm over the two."""
-    import beyond_report
     from scipy import stats
+
+    from beyond import report as beyond_report
 
     returns = {  # per eval γ at 1M, seeds 1–4
         "pgg_g1to1.2": {1.0: [1000, 1100, 900, 1000], 1.2: [2000, 2200, 1900, 2100], 1.5: [1500, 1300, 1700, 1400]},
@@ -330,8 +326,9 @@ def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the
 def test_beyond_report_pairs_goal_distances_by_seed_and_draws_only_the_variants_its_tables_hold(monkeypatch, tmp_path):
     """Each seed's change in distance from γ = 1 to the largest γ, paired by seed (a seed missing at one γ is left
     out), a one-sample t test of the changes; a variant of goal_distance.csv that no table holds is not drawn."""
-    import beyond_report
     from scipy import stats
+
+    from beyond import report as beyond_report
 
     distance = {("Reacher-v4", "ppo", 1.0): {1: 0.1, 2: 0.2, 3: 0.3, 4: 0.2},
                 ("Reacher-v4", "ppo", 1.5): {1: 0.15, 2: 0.18, 3: 0.4},
@@ -346,10 +343,9 @@ def test_beyond_report_pairs_goal_distances_by_seed_and_draws_only_the_variants_
 
 
 def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
-    import goal_distance
-
     import eval_gamma_sweep as sweep
     import ppo_pgg_continuous
+    from beyond import goal_distance
 
     torch.manual_seed(0)
     agent = ppo_pgg_continuous.Agent(11, 2, null_dims=(4, 5, 8, 9, 10), action_bounds=(-np.ones(2), np.ones(2)))
@@ -369,7 +365,7 @@ def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
     """results/beyond/report.md, report.csv and report_values.csv regenerate from the committed CSVs alone: a changed script or CSV
     whose report was not rewritten fails here. Floats are compared to 1e-9 (another CPU may round a sum
     differently); the report's rounded text exactly, but for its line naming the folder."""
-    import beyond_report
+    from beyond import report as beyond_report
 
     beyond = ROOT / "results" / "beyond"
     for path in [*beyond.glob("*/episodes.csv"), *beyond.glob("*/heldout_gamma.csv"), *beyond.glob("*.csv"),
@@ -406,8 +402,9 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
     episodes, each seed's fall and return there, the cloned null's minus the own null's, paired by seed
     (checked against scipy's paired t test, on seeds matched by number, not by position); the detectable
     difference is where the paired test's power reaches 80%; n/a where no seed differs."""
-    import beyond_report
     from scipy import stats
+
+    from beyond import report as beyond_report
 
     def cloned(rows, episode_seed):
         gain = {1.0: 0.0, 1.2: 0.1, 1.5: 0.05}  # the cloned null gains at 1.2 and keeps most of it at 1.5

@@ -1,4 +1,4 @@
-"""The command task's section of "Beyond the paper" (paper_study/beyond_report.py), on a synthetic set: the real
+"""The command task's section of "Beyond the paper" (beyond/report.py), on a synthetic set: the real
 one is trained by results/beyond/command/run_all.sh."""
 
 import csv
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: F401  (puts the repository on sys.path)
 
-from paper_study import beyond_report
-from paper_study.command_tracking import COLUMNS
+from beyond import report as beyond_report
+from beyond.command_tracking import COLUMNS
 from pgg_utils.files import write_csv_atomic
 
 GAMMAS, COMMANDS = (0.5, 1.0, 2.0), (-0.5, 0.0, 1.0, 2.0, 3.0)

@@ -1,5 +1,5 @@
-"""The command task of "Beyond the paper" (paper_study/cheetah_velocity.py) and the tool that measures how closely
-agents follow its command (paper_study/command_tracking.py)."""
+"""The command task of "Beyond the paper" (paper_study/cheetah_velocity/) and the tool that measures how closely
+agents follow its command (beyond/command_tracking.py)."""
 
 import csv
 import subprocess
@@ -12,7 +12,8 @@ import pytest
 from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
 
 import reproduce
-from paper_study import cheetah_velocity, command_tracking, paper
+from beyond import command_tracking
+from paper_study import cheetah_velocity, paper
 from paper_study.cheetah_velocity import COMMAND_INDEX, COMMAND_RANGE, ENV_ID
 from pgg_utils import checkpoints, checks, scripts
 
@@ -152,7 +153,7 @@ def test_tracking_skips_another_tasks_checkpoint_and_refuses_bad_settings_in_one
     checkpoint = checkpoints.checkpoints_of(other)[-1]
     rows, skipped = command_tracking.evaluate_checkpoint(checkpoint, tracking_args(tmp_path, [checkpoint]))
     assert rows == [] and "Humanoid-v4 is not the command task" in skipped
-    tool = "paper_study/command_tracking.py"
+    tool = "beyond/command_tracking.py"
     proc = run_script(tool, str(other), "--output", str(tmp_path / "x.csv"), "--episodes", "1")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and not (tmp_path / "x.csv").exists()
     assert "not the command task" in proc.stderr and "error: no checkpoint of the command task" in proc.stderr
@@ -164,7 +165,7 @@ def test_tracking_skips_another_tasks_checkpoint_and_refuses_bad_settings_in_one
 @pytest.mark.slow
 def test_the_cli_writes_every_episode_sorted(command_run, tmp_path):
     """The command writes one row per episode of every cell, with the CSV's columns, in a stable order."""
-    proc = run_script("paper_study/command_tracking.py", str(command_run), "--output", str(tmp_path / "t.csv"),
+    proc = run_script("beyond/command_tracking.py", str(command_run), "--output", str(tmp_path / "t.csv"),
                       "--gammas", "1", "--commands", "0", "2.5", "--episodes", "2")  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     with open(tmp_path / "t.csv", newline="") as f:

@@ -1,5 +1,5 @@
 """The section "Guidance on a condition, with the condition dropped in training" of "Beyond the paper"
-(paper_study/condition_dropout.py), on synthetic sets: the real ones are trained by
+(beyond/condition_dropout.py), on synthetic sets: the real ones are trained by
 results/beyond/condition_dropout/run_all.sh. Every number is recomputed here from the synthetic rows by a route
 of its own (per seed, then over seeds; scipy's tests; Holm written out), so a number or a verdict computed
 wrongly fails."""
@@ -12,11 +12,11 @@ import pytest
 from conftest import ROOT
 from scipy import stats
 
-from paper_study import beyond_report
-from paper_study import condition_dropout as cd
-from paper_study.command_tracking import COLUMNS
-from paper_study.goal_distance import COLUMNS as GOAL_COLUMNS
-from paper_study.learned_null import COLUMNS as NULL_COLUMNS
+from beyond import condition_dropout as cd
+from beyond import report as beyond_report
+from beyond.command_tracking import COLUMNS
+from beyond.goal_distance import COLUMNS as GOAL_COLUMNS
+from beyond.learned_null import COLUMNS as NULL_COLUMNS
 from paper_study.stats import detectable_gap
 from pgg_utils.files import write_csv_atomic
 

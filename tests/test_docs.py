@@ -49,10 +49,10 @@ def test_the_link_check_sees_a_broken_link_and_a_missing_anchor(tmp_path):
 
 
 def test_readme_shows_the_glance_table_as_the_script_prints_it():
-    printed = subprocess.run([sys.executable, str(ROOT / "paper_study" / "results_at_a_glance.py")], capture_output=True,
-                             text=True, check=True, timeout=120).stdout  # fmt: skip
+    printed = subprocess.run([sys.executable, "-m", "paper_study.results_at_a_glance"], capture_output=True,
+                             text=True, check=True, timeout=120, cwd=ROOT).stdout  # fmt: skip
     readme = (ROOT / "README.md").read_text()
-    shown = readme.split("<!-- glance: python paper_study/results_at_a_glance.py -->\n")[1].split("<!-- /glance -->")[0]
+    shown = readme.split("<!-- glance: python -m paper_study.results_at_a_glance -->\n")[1].split("<!-- /glance -->")[0]
     assert shown == printed
     assert printed.count("\n") == 2 + 8  # a row per task of the paper's two tables
 
@@ -115,10 +115,12 @@ def test_the_which_gamma_recipe_runs_on_a_tiny_cartpole_run(tmp_path):
     for command in readme:
         program, *flags = command.split()
         assert program == "python"
-        flags[0] = str(ROOT / flags[0])
+        if flags[0] != "-m":
+            flags[0] = str(ROOT / flags[0])
         if flags[0].endswith("eval_gamma_sweep.py"):
             flags += ["--episodes", "5"]
-        proc = subprocess.run([sys.executable, *flags], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+        proc = subprocess.run([sys.executable, *flags], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                              env={**os.environ, "PYTHONPATH": str(ROOT)})  # fmt: skip
         assert proc.returncode == 0, f"{command}: {proc.stderr}"
     report = (tmp_path / "runs" / "heldout" / "heldout_gamma.md").read_text()
     assert "CartPole-v1" in report and "episode seeds 20000–20004" in report
@@ -160,7 +162,7 @@ def rounds_from(text: str, value: float) -> bool:
 # paper" section, in the order written; None for a label: a number of a variant's name or an eval γ.
 H, W, U, P, R, A = "Hopper-v4", "Walker2d-v4", "Humanoid-v4", "Pusher-v4", "Reacher-v4", "Acrobot-v1"
 LIN, ADA, CON, PPO, GOAL = "pgg_g1to1.2", "pgg_adaptive1.1_kl0.04", "pgg_g1.1", "ppo", "pgg_g1.1_goal"
-BC = " null=bc"  # a behaviour-cloned null's rows (paper_study/beyond_report.py)
+BC = " null=bc"  # a behaviour-cloned null's rows (beyond/report.py)
 CLONING = "pgg_g1.1_bc0.1"  # the variant that clones while it trains
 FALL = "largest γ vs best (%)"
 CMD, NULL17 = "paper_study.cheetah_velocity:HalfCheetahVelocity-v0", "pgg_g1.1_null17"  # the command task's set

@@ -13,7 +13,7 @@ from test_sweep_code import FIXTURE, LOOP_LINE, sweep_args, sweep_copy
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from paper_study import command_tracking, goal_distance
+from beyond import command_tracking, goal_distance
 from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV_ID
 from pgg_utils import bc_null, files, spaces
 

@@ -1,4 +1,4 @@
-"""What the learned null is (paper_study/learned_null.py): the command, or Reacher's goal, whose conditional policy
+"""What the learned null is (beyond/learned_null.py): the command, or Reacher's goal, whose conditional policy
 is closest to the agent's unconditional one on its own states."""
 
 import csv
@@ -9,7 +9,7 @@ import pytest
 import torch
 from conftest import SCRIPTS, one_line_error, run_script, small_args, train
 
-from paper_study import learned_null
+from beyond import learned_null
 from paper_study.cheetah_velocity import COMMAND_INDEX, ENV_ID
 from pgg_utils import checkpoints, scripts
 from pgg_utils.distributions import Gaussian
@@ -90,7 +90,7 @@ def test_the_kl_is_that_of_two_diagonal_gaussians():
 def test_the_cli_writes_a_row_per_checkpoint_and_refuses_bad_input_in_one_line(command_run, tmp_path):
     """A row per checkpoint with the CSV's columns; another task's checkpoint is named and left out, and with nothing
     left, or a zero episode count, one line of error and exit 2, no file."""
-    tool = "paper_study/learned_null.py"
+    tool = "beyond/learned_null.py"
     proc = run_script(tool, str(command_run), "--episodes", "1", "--output", str(tmp_path / "n.csv"))
     assert proc.returncode == 0, proc.stderr
     with open(tmp_path / "n.csv", newline="") as f:

@@ -2,6 +2,7 @@
 leaves nothing git would show in the source tree; CITATION.cff holds to the Citation File Format 1.2.0
 and cites the paper as the README does."""
 
+import csv
 import os
 import re
 import shutil
@@ -39,8 +40,8 @@ def build_backend_here() -> None:
 
 @pytest.mark.slow
 def test_a_non_editable_install_finds_the_papers_data_from_any_folder(tmp_path):
-    """`pip install .` (not -e) of a copy of the repository, then plot_results --compare-paper run as an
-    installed module from a folder outside any source tree: it reads the paper's numbers from the
+    """`pip install .` (not -e) of a copy of the repository, then a sweep of a committed agent and
+    plot_results --compare-paper, each run as an installed module from a folder outside any source tree: it reads the paper's numbers from the
     installed package and tables the committed discrete sweep exactly as committed, with its provenance.
     Before the paper's CSVs were package data it stopped with `paper_study/data/paper_results.csv: No such
     file`; before build/ was ignored the install left it untracked in the tree; before --provenance looked
@@ -69,6 +70,16 @@ def test_a_non_editable_install_finds_the_papers_data_from_any_folder(tmp_path):
     where = subprocess.run([sys.executable, "-c", locate], cwd=elsewhere, env=env, capture_output=True, text=True)
     assert where.returncode == 0, where.stderr
     assert all(Path(line).is_relative_to(site) for line in where.stdout.split()), where.stdout  # not the source tree
+    # The study past the paper (beyond/, the command task) stays in the repository.
+    assert not (site / "beyond").exists() and not (site / "paper_study" / "cheetah_velocity").exists()
+    checkpoint = ROOT / "results/discrete/agents/CartPole-v1__ppo__s1/checkpoints/step_000500000.pt"
+    swept = subprocess.run([sys.executable, "-m", "eval_gamma_sweep", str(checkpoint), "--gammas", "1", "2",
+                            "--episodes", "2", "--workers", "1", "--output", str(tmp_path / "sweep")],
+                           cwd=elsewhere, env=env, capture_output=True, text=True, timeout=300)  # fmt: skip
+    assert swept.returncode == 0, swept.stderr
+    (evaluated,) = list(csv.DictReader(open(tmp_path / "sweep" / "evaluated_by.csv")))
+    assert evaluated["evaluated_by"] == "ppo_pgg_discrete.py", evaluated
+    assert len(list(csv.DictReader(open(tmp_path / "sweep" / "episodes.csv")))) == 4
     out = tmp_path / "tables"
     plotted = subprocess.run([sys.executable, "-m", "plot_results", str(ROOT / "results" / "discrete"),
                               "--compare-paper", "--provenance", str(ROOT / "results" / "provenance.csv"),

@@ -1058,7 +1058,7 @@ def test_the_paper_study_reads_episodes_without_plot_results(tmp_path):
     plot_results: each runs with plot_results made unimportable."""
     code = ("import sys; sys.modules['plot_results'] = None; sys.path.insert(0, '.'); "
             "import paper_study.compare_sweeps, paper_study.heldout_gamma, paper_study.selection, "
-            "paper_study.bc_train_pilot, paper_study.summary; sys.path.insert(0, 'paper_study/data'); "
+            "beyond.bc_train_pilot, paper_study.summary; sys.path.insert(0, 'paper_study/data'); "
             "import read_dropout_figure")  # fmt: skip
     proc = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
@@ -1094,7 +1094,7 @@ def test_every_reader_of_episodes_refuses_a_cut_file(tmp_path):
     for script, flags in [("plot_results.py", [cut, "--output", str(tmp_path / "o")]),
                           ("paper_study/heldout_gamma.py", [cut, cut, "--output", str(tmp_path / "h")]),
                           ("paper_study/compare_sweeps.py", [cut, cut]),
-                          ("paper_study/bc_train_pilot.py", [str(tmp_path / "runs"), cut])]:  # fmt: skip
+                          ("beyond/bc_train_pilot.py", [str(tmp_path / "runs"), cut])]:  # fmt: skip
         line = one_line_error(run_script(script, *flags))
         assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (script, line)
 

@@ -10,7 +10,8 @@ import pytest
 from conftest import ROOT, one_line_error
 
 import reproduce
-from paper_study import beyond_report, paper
+from beyond import report as beyond_report
+from paper_study import paper
 from pgg_utils import checkpoints
 from pgg_utils.files import RECORD, InputError, lock_directory, read_csv, sha256_of
 

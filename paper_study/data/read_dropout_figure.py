@@ -9,9 +9,9 @@ The figure's black PPO markers read back the paper's PPO table to within 1% of a
 (tests/test_plots.py). The paler γ markers, blended with the CI bands, cannot be checked that way:
 the paper gives no numbers for them.
 
-    python paper_study/data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
+    python -m paper_study.data.read_dropout_figure ../shared/paper/fig_continuous_dropout0.1.png \
         --csv paper_study/data/paper_dropout_figure.csv
-    python paper_study/data/read_dropout_figure.py ../shared/paper/fig_continuous_dropout0.1.png \
+    python -m paper_study.data.read_dropout_figure ../shared/paper/fig_continuous_dropout0.1.png \
         --beside results/continuous/fig_continuous_pgg_drop0.1.png \
         --output results/continuous/side_by_side_pgg_drop0.1.png \
         --ours results/continuous/episodes.csv \
@@ -30,7 +30,6 @@ import tyro
 from PIL import Image
 from scipy import stats
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 from paper_study.agreement import step_label
 from paper_study.stats import holm
 from paper_study.summary import read_episodes, read_provenance, summarise, table_csv

@@ -15,16 +15,16 @@ beyond() {  # task, variants...: train and sweep, then the held-out gamma on a f
     python eval_gamma_sweep.py "results/beyond/$env/agents" --eval-seed 20000 --workers "${WORKERS:-2}" \
         --output "runs/sweeps/beyond_fresh_$env" &&
     cp "runs/sweeps/beyond_fresh_$env/evaluated_by.csv" "results/beyond/$env/heldout_evaluated_by.csv" &&
-    python paper_study/heldout_gamma.py "results/beyond/$env/episodes.csv" \
+    python -m paper_study.heldout_gamma "results/beyond/$env/episodes.csv" \
         "runs/sweeps/beyond_fresh_$env/episodes.csv" --output "results/beyond/$env"
     echo "set $env held-out gamma: exit $? at $(date -u +%FT%TZ)"
 }
 goal_distance() {
-    python paper_study/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \
+    python -m beyond.goal_distance results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \
         results/continuous/agents --steps 1000000 --output results/beyond/goal_distance.csv
 }
 report() {
-    python paper_study/beyond_report.py results/beyond --table results/continuous/episodes.csv --runs runs/beyond
+    python -m beyond.report results/beyond --table results/continuous/episodes.csv --runs runs/beyond
 }
 beyond Hopper-v4 pgg_g1to1.2 pgg_adaptive1.1_kl0.04 && report
 beyond Pusher-v4 pgg_g1.1_goal && goal_distance && report

@@ -26,7 +26,7 @@ cp runs/sweeps/bc_null_10000/episodes.csv "$out/episodes.csv"
 cp runs/sweeps/bc_null_20000/episodes.csv "$out/heldout_fresh.csv"
 cp runs/sweeps/bc_null_10000/evaluated_by.csv "$out/evaluated_by.csv"  # which file evaluated each agent
 cp runs/sweeps/bc_null_20000/evaluated_by.csv "$out/heldout_evaluated_by.csv"
-python paper_study/heldout_gamma.py "$out/episodes.csv" "$out/heldout_fresh.csv" --null-branch bc --output "$out"
+python -m paper_study.heldout_gamma "$out/episodes.csv" "$out/heldout_fresh.csv" --null-branch bc --output "$out"
 # The same agents with their own null on the fresh episodes at every γ (the tables' fresh sweeps hold only
 # γ = 1 and the selected γ on some tasks): the other side of the report's fresh-episode tests.
 python eval_gamma_sweep.py results/continuous/agents/{Hopper,Walker2d,Humanoid}-v4__{ppo,pgg_g1.1}__s{1,2,3,4,5} \

@@ -15,4 +15,4 @@ train 0.1 actor & train 1 actor & wait
 train 0 null  # no cloning: the constant γ_train 1.1 itself, the pilot's baseline
 python eval_gamma_sweep.py runs/bc_pilot --steps 300000 --gammas 1 1.2 1.5 --episodes 20 --workers 2 \
     --output runs/sweeps/bc_pilot
-python paper_study/bc_train_pilot.py runs/bc_pilot runs/sweeps/bc_pilot/episodes.csv > results/beyond/bc_train/pilot.txt
+python -m beyond.bc_train_pilot runs/bc_pilot runs/sweeps/bc_pilot/episodes.csv > results/beyond/bc_train/pilot.txt

@@ -15,7 +15,7 @@ bc_set() {  # task
         --output "runs/sweeps/bc_train_fresh_$env" &&
     cp "runs/sweeps/bc_train_fresh_$env/episodes.csv" "$out/heldout_fresh.csv" &&
     cp "runs/sweeps/bc_train_fresh_$env/evaluated_by.csv" "$out/heldout_evaluated_by.csv" &&
-    python paper_study/heldout_gamma.py "$out/episodes.csv" "$out/heldout_fresh.csv" --output "$out"
+    python -m paper_study.heldout_gamma "$out/episodes.csv" "$out/heldout_fresh.csv" --output "$out"
     echo "set $env: exit $? at $(date -u +%FT%TZ)"
 }
 tasks=("$@")

@@ -3,7 +3,7 @@
 # classifier-free guidance's recipe on a condition, the condition's dimensions replaced by the null embedding
 # with probability 0.1 in updates (--cond-dropout 0.1 with --null-dims), both branches trained at γ_train 1,
 # guidance only at test. 5 seeds x 1M steps with --compile, checkpoints every 200k, as the sets beside them:
-#   command/     HalfCheetah told how fast to run (paper_study/cheetah_velocity.py, the command at index 17),
+#   command/     HalfCheetah told how fast to run (paper_study/cheetah_velocity/, the command at index 17),
 #                pgg_drop0.1_null17; swept at GAMMAS on commands from the training range (episode seeds 10000+),
 #                fresh episodes for the held-out γ (20000+), then tracked at GAMMAS x COMMANDS (30000+) as
 #                results/beyond/command was
@@ -31,16 +31,16 @@ python eval_gamma_sweep.py "$out/command/agents" --steps 1000000 --gammas "${GAM
     --workers "$workers" --output runs/sweeps/condition_dropout_command_fresh &&
 cp runs/sweeps/condition_dropout_command_fresh/episodes.csv "$out/command/heldout_fresh.csv" &&
 cp runs/sweeps/condition_dropout_command_fresh/evaluated_by.csv "$out/command/heldout_evaluated_by.csv" &&
-python paper_study/heldout_gamma.py "$out/command/episodes.csv" "$out/command/heldout_fresh.csv" --output "$out/command"
+python -m paper_study.heldout_gamma "$out/command/episodes.csv" "$out/command/heldout_fresh.csv" --output "$out/command"
 echo "command held-out γ: exit $? at $(date -u +%FT%TZ)"
 python eval_gamma_sweep.py "$out/Reacher-v4/agents" --eval-seed 20000 --workers "$workers" \
     --output runs/sweeps/condition_dropout_reacher_fresh &&
 cp runs/sweeps/condition_dropout_reacher_fresh/evaluated_by.csv "$out/Reacher-v4/heldout_evaluated_by.csv" &&
-python paper_study/heldout_gamma.py "$out/Reacher-v4/episodes.csv" \
+python -m paper_study.heldout_gamma "$out/Reacher-v4/episodes.csv" \
     runs/sweeps/condition_dropout_reacher_fresh/episodes.csv --output "$out/Reacher-v4"
 echo "Reacher held-out γ: exit $? at $(date -u +%FT%TZ)"
-python paper_study/command_tracking.py "$out/command/agents" --steps 1000000 --gammas "${GAMMAS[@]}" \
+python -m beyond.command_tracking "$out/command/agents" --steps 1000000 --gammas "${GAMMAS[@]}" \
     --commands "${COMMANDS[@]}" --episodes 50 --workers "$workers" --output "$out/command/tracking.csv"
 echo "command tracking: exit $? at $(date -u +%FT%TZ)"
-python paper_study/goal_distance.py "$out/Reacher-v4/agents" --steps 1000000 --output "$out/goal_distance.csv"
+python -m beyond.goal_distance "$out/Reacher-v4/agents" --steps 1000000 --output "$out/goal_distance.csv"
 echo "Reacher goal distance: exit $? at $(date -u +%FT%TZ)"

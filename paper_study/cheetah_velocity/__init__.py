@@ -17,7 +17,7 @@ the command, which PPO's reward scaling would divide every signal by (a pilot wi
 begun to run after 200k steps: results/beyond/command/pilot.txt).
 
 `reset(options={"command": v})` sets the command instead of drawing it (an evaluation's commands inside and
-outside the training range, paper_study/command_tracking.py); the draw is made in either case, after the start
+outside the training range, beyond/command_tracking.py); the draw is made in either case, after the start
 state's, so that one reset seed gives HalfCheetah-v4's start state for that seed and the same RNG state
 whatever the command. Training imports nothing of this module: `gym.make` imports it by its id.
 """

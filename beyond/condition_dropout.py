@@ -1,13 +1,13 @@
 """The section "Guidance on a condition, with the condition dropped in training" of "Beyond the paper", and its
 figure: classifier-free guidance's recipe on a condition (the command or the goal dropped with probability 0.1 in
 updates, both branches trained at γ_train 1, guidance only at test; results/beyond/condition_dropout/run_all.sh)
-against the committed sets beside it. paper_study/beyond_report.py calls `read`, `section` and `figure`; it reads:
-  condition_dropout/command/tracking.csv   the command set with the command dropped (paper_study/command_tracking.py)
+against the committed sets beside it. beyond/report.py calls `read`, `section` and `figure`; it reads:
+  condition_dropout/command/tracking.csv   the command set with the command dropped (beyond/command_tracking.py)
   command/tracking.csv                     the command null without dropout, the state null and PPO
-  condition_dropout/goal_distance.csv      Reacher-v4 with the goal dropped (paper_study/goal_distance.py)
+  condition_dropout/goal_distance.csv      Reacher-v4 with the goal dropped (beyond/goal_distance.py)
   goal_distance.csv                        Reacher-v4's goal null, state null and PPO
   command/, Reacher-v4/, condition_dropout/command/, condition_dropout/Reacher-v4/ learned_null.csv
-                                           what each agent's null acts like (paper_study/learned_null.py)
+                                           what each agent's null acts like (beyond/learned_null.py)
 A file absent is named in one line and its part gives no number; a set with fewer than COMMAND_SEEDS seeds, or
 a cell short of episodes, is marked partial and gets no verdict.
 
@@ -27,8 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from paper_study.agreement import fmt_p, step_label
-from paper_study.beyond_report import (
+from beyond.report import (
     COMMAND_ENV,
     COMMAND_FOLDER,
     COMMAND_NULL,
@@ -43,6 +42,7 @@ from paper_study.beyond_report import (
     seeds_cell,
     welch_of,
 )
+from paper_study.agreement import fmt_p, step_label
 from paper_study.paper import paper_name
 from paper_study.stats import ALPHA, holm
 
@@ -558,7 +558,7 @@ def null_part(sets: Sets, values_out: list[dict]) -> list[str]:
     lines = ["", "### What the learned null is", "",
              ("For each agent at its last mark, the command (Reacher: the goal position) whose conditional policy "
               "π(a|s, c) is closest to π(a|s, ∅) in mean KL over the agent's own states at γ = 1 "
-              "(`paper_study/learned_null.py`: 5,000 states; a grid of commands from −1 to 4 m/s by 0.01, of goals on "
+              "(`beyond/learned_null.py`: 5,000 states; a grid of commands from −1 to 4 m/s by 0.01, of goals on "
               "a 0.01 m lattice of [−0.25, 0.25]²). Beside it the KL there and the KL to the states' own condition "
               "(what guidance moves away from), and the median over states of how far each state's own closest "
               "condition lies from it: a null that is the policy at one fixed condition has a KL near 0 there and its "
@@ -605,7 +605,7 @@ def null_part(sets: Sets, values_out: list[dict]) -> list[str]:
     if readings:
         lines += [*table, "", f"Per seed, {'; '.join(readings)}."]
     if missing:
-        lines += ["", (f"Not measured yet: {'; '.join(missing)} (`python paper_study/learned_null.py <agents> --steps "
+        lines += ["", (f"Not measured yet: {'; '.join(missing)} (`python -m beyond.learned_null <agents> --steps "
                        f"1000000 --output <set>/{LEARNED_NULL}`).")]  # fmt: skip
     return lines
 

@@ -1,8 +1,8 @@
 """How closely agents of the command task follow their command, against the eval γ: per episode the commanded
 and achieved mean forward velocity, the tracking error and the return, for "Beyond the paper"
-(paper_study/beyond_report.py, "Guidance on a command").
+(beyond/report.py, "Guidance on a command").
 
-    python paper_study/command_tracking.py results/beyond/command/agents --steps 1000000 \\
+    python -m beyond.command_tracking results/beyond/command/agents --steps 1000000 \\
         --gammas 0.5 1 1.25 1.5 2 3 --commands -0.5 0 0.5 1 1.5 2 2.5 3 --output results/beyond/command/tracking.csv
 
 Each checkpoint is loaded by the code that trained it (pgg_utils.scripts.load_checkpoint), its task made by that
@@ -30,7 +30,6 @@ import numpy as np
 import torch
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 from paper_study.cheetah_velocity import HalfCheetahVelocity
 from pgg_utils import scripts, spaces

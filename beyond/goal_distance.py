@@ -1,7 +1,7 @@
 """How close guidance brings the fingertip (Reacher-v4) or the object (Pusher-v4) to its goal: the final
-distance of every episode against the eval γ, for "Beyond the paper" (paper_study/beyond_report.py).
+distance of every episode against the eval γ, for "Beyond the paper" (beyond/report.py).
 
-    python paper_study/goal_distance.py results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
+    python -m beyond.goal_distance results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
         results/continuous/agents --envs Reacher-v4 Pusher-v4 --steps 1000000 --output results/beyond/goal_distance.csv
 
 Each (checkpoint, γ) is a sweep cell, played by the sweep's own loop (eval_gamma_sweep.evaluate_cell: reset
@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 from paper_study.paper import PAPER_GAMMAS
 from pgg_utils import checkpoints

@@ -1,9 +1,9 @@
 """What the learned null is: for each agent of a conditioned task, the command (or, on Reacher-v4, the goal)
 whose conditional policy π(a|s, c) is closest to its unconditional one π(a|s, ∅) in KL on the task's states, for
-"Beyond the paper" (paper_study/condition_dropout.py, "Guidance on a condition, with the condition dropped in
+"Beyond the paper" (beyond/condition_dropout.py, "Guidance on a condition, with the condition dropped in
 training").
 
-    python paper_study/learned_null.py results/beyond/command/agents --steps 1000000 \\
+    python -m beyond.learned_null results/beyond/command/agents --steps 1000000 \\
         --output results/beyond/command/learned_null.csv
 
 The states are the agent's own: --episodes episodes at γ = 1, each with the condition the task draws (a command
@@ -30,7 +30,6 @@ import numpy as np
 import torch
 import tyro
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import eval_gamma_sweep as sweep
 from paper_study.cheetah_velocity import COMMAND_INDEX
 from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV

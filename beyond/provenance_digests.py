@@ -2,7 +2,7 @@
 was trained at, whether its files were modified, the digest of the training script and pgg_utils/*.py) against
 the digest each commit of this repository gives (pgg_utils.scripts.code_revision's recipe, recomputed from git):
 
-    python results/beyond/provenance/digests.py results/beyond/*-v4/agents results/beyond/bc_train/*/agents \\
+    python -m beyond.provenance_digests results/beyond/*-v4/agents results/beyond/bc_train/*/agents \\
         results/beyond/command/agents > results/beyond/provenance/digests.txt
 
 (bc_null/agents are the tables' agents with a fitted null: their training is the tables', results/README.md.)
@@ -18,8 +18,7 @@ import sys
 from collections import defaultdict
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[3]
-sys.path.insert(0, str(ROOT))
+ROOT = Path(__file__).resolve().parents[1]
 from pgg_utils import checkpoints
 
 

@@ -1,7 +1,7 @@
 """Pilot of the behaviour-cloned null (pgg_utils/bc_null.py): how many of an agent's own episodes fix the
 fitted unconditional branch, and whether the frozen actor reaches the maximum-likelihood target.
 
-    python paper_study/bc_null_pilot.py CHECKPOINT [CHECKPOINT ...] > results/beyond/bc_null/pilot.txt
+    python -m beyond.bc_null_pilot CHECKPOINT [CHECKPOINT ...] > results/beyond/bc_null/pilot.txt
 
 For each checkpoint and n in 1, 2, 5, 10, 20, 40 episodes (seeds 30000+): the fit's distance to the
 target (continuous: the mean action, in units of the agent's σ; discrete: the action frequencies) and to
@@ -9,12 +9,10 @@ the fit on 40 episodes.
 """
 
 import sys
-from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pgg_utils import bc_null, checkpoints, scripts
 
 torch.set_num_threads(1)

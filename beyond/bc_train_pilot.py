@@ -2,7 +2,7 @@
 its return at each swept γ (mean over the sweep's episodes) and how near its unconditional branch lies to
 the mean action of its own episodes (pgg_utils.bc_null.reach, in units of σ), the thing the term trains.
 
-    python paper_study/bc_train_pilot.py runs/bc_pilot runs/sweeps/bc_pilot/episodes.csv
+    python -m beyond.bc_train_pilot runs/bc_pilot runs/sweeps/bc_pilot/episodes.csv
 """
 
 import sys
@@ -11,7 +11,6 @@ from pathlib import Path
 
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from pgg_utils import bc_null, checkpoints, scripts
 from pgg_utils.episodes import read_episodes, select_mode
 from pgg_utils.files import one_line_errors
