@@ -1,5 +1,4 @@
-"""The paper study: the paper's experiment written down (tasks, variants, γ lists, its numbers in data/),
-the report against it, the statistics and figures of the tables, the held-out γ selection, and the
-report generators of results/. It reads what training and the sweep write; training, the sweep and
-pgg_utils import nothing of it (tests/test_extending.py). Its entry points are plot_results.py and
-reproduce.py at the top level and the scripts in this folder."""
+"""The paper study: the paper's experiment written down (tasks, variants, γ lists, its numbers in data/), the
+report against it, the statistics and figures of the tables and the held-out γ selection, for plot_results.py and
+reproduce.py. It reads what training and the sweep write; they and pgg_utils import nothing of it, and it imports
+nothing of beyond/ (tests/test_layers.py, docs/layout.md). Its tools run as `python -m paper_study.<tool>`."""
