@@ -487,7 +487,7 @@ PAPER_REFERENCE_TEXT = "0 = the paper's PPO at its first step, 1 = at its last"
 def aggregate_intervals(aggregate: list[dict], kind: str, reference: str = PAPER_REFERENCE_TEXT):
     """The aggregate IQM as rliable draws it: at the last step, one row per (variant, eval γ), the IQM
     of normalised scores with its 95% CI as a bar, in the variant's colour; dotted lines at the two
-    fixed references, which `reference` names (plot_results.reference_text: the paper's PPO at its first
+    fixed references, which `reference` names (paper_study.aggregate.reference_text: the paper's PPO at its first
     step and at its last, or the sweep's own). `aggregate`: aggregate_iqm's rows."""
     last = max(int(r["step"]) for r in aggregate)
     rows = sorted((r for r in aggregate if int(r["step"]) == last),
@@ -515,7 +515,7 @@ def performance_profiles(profiles: dict, step: int, envs: int, kind: str, refere
     panel per variant, one line per eval γ (its colour in every figure) of the fraction of (task, seed)
     scores above each τ, its stratified-bootstrap 95% CI as a band, over the τ the scores span; dotted
     lines at the two fixed references, which `reference` names, where they lie in that span.
-    `profiles`: {(variant [series], eval γ): (taus, profile, low, high)} (plot_results.performance_profiles)."""
+    `profiles`: {(variant [series], eval γ): (taus, profile, low, high)} (paper_study.aggregate.performance_profiles)."""
     variants = sorted({v for v, _ in profiles}, key=lambda v: (variant_rank(v.split(" [")[0]), v))
     fig, axes = panels(len(variants))
     entries = []
