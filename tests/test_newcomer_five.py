@@ -23,7 +23,7 @@ import eval_gamma_sweep as sweep
 import plot_results as plots
 import ppo_pgg_discrete
 import reproduce
-from paper_study import figures
+from paper_study import aggregate, figures
 from pgg_utils import cells, checkpoints, rundir, runs
 from pgg_utils.arguments import answer_cleanrl_habits
 from pgg_utils.checks import env_error
@@ -145,7 +145,7 @@ def test_aggregates_on_a_task_the_paper_did_not_run_normalise_by_the_sweeps_own_
             "for MyTask-v0")  # fmt: skip
     assert f"Scores normalised per task: {said}." in (tmp_path / "out" / "aggregate_iqm.md").read_text()
     summary = summary_of(tmp_path / "episodes.csv")
-    assert said in figures.aggregate_intervals(plots.aggregate_iqm(summary), "discrete", said).axes[0].get_xlabel()
+    assert said in figures.aggregate_intervals(aggregation.aggregate_iqm(summary), "discrete", said).axes[0].get_xlabel()
     assert (tmp_path / "out" / "performance_profile_discrete.png").exists()
 
 
@@ -154,9 +154,9 @@ def test_the_performance_profile_spans_the_scores_range(tmp_path):
     informative region squeezed): it spans the scores, as rliable's own plots do."""
     write_episodes(tmp_path / "episodes.csv", episode_rows(SEED_MEANS))
     summary = summary_of(tmp_path / "episodes.csv")
-    profiles, step, envs = plots.performance_profiles(summary)
+    profiles, step, envs = aggregation.performance_profiles(summary)
     scores = np.concatenate(
-        [np.concatenate(s) for (_, at, _), s in plots.normalised_scores(summary).items() if at == step]
+        [np.concatenate(s) for (_, at, _), s in aggregation.normalised_scores(summary).items() if at == step]
     )
     fig = figures.performance_profiles(profiles, step, envs, "discrete")
     for ax in (ax for ax in fig.axes if ax.get_visible()):

@@ -15,7 +15,7 @@ from conftest import ROOT
 from scipy import stats
 
 import plot_results as plots
-from paper_study import figures, paper
+from paper_study import aggregate, figures, paper
 from paper_study.figures import PAPER_DROPOUT_FIGURE_YLIM
 from paper_study.stats import (
     bootstrap_coverage,
@@ -740,7 +740,7 @@ def test_batched_iqm_equals_scipy_trim_mean():
     rng = np.random.default_rng(0)
     samples = [rng.normal(size=(7, 5)), rng.normal(size=(7, 3))]
     expected = [stats.trim_mean(np.concatenate([s[i] for s in samples]), 0.25) for i in range(7)]
-    assert plots.iqm_along(*samples, axis=-1) == pytest.approx(expected)
+    assert aggregation.iqm_along(*samples, axis=-1) == pytest.approx(expected)
 
 
 @pytest.mark.slow
@@ -753,8 +753,8 @@ def test_the_performance_profile_is_drawn_from_the_iqms_normalised_scores(sweep_
         tmp_path / "out" / "performance_profile_discrete.pdf",
     } <= set(written)
     summary = summary_of(sweep_dir / "episodes.csv")
-    scores = plots.normalised_scores(summary)
-    profiles, step, envs = plots.performance_profiles(summary)
+    scores = aggregation.normalised_scores(summary)
+    profiles, step, envs = aggregation.performance_profiles(summary)
     assert step == 200000 and envs == 2 and set(profiles) == {("ppo", 1.0), ("pgg_g1.1", 1.0), ("pgg_g1.1", 2.0)}
     for (variant, gamma), (taus, profile, low, high) in profiles.items():
         pooled = np.concatenate(scores[(variant, step, gamma)])
@@ -762,7 +762,7 @@ def test_the_performance_profile_is_drawn_from_the_iqms_normalised_scores(sweep_
         assert np.all(low <= profile + 1e-12) and np.all(profile <= high + 1e-12)
         iqm_row = next(
             r
-            for r in plots.aggregate_iqm(summary)
+            for r in aggregation.aggregate_iqm(summary)
             if (r["variant"], r["step"], r["eval_guidance"]) == (variant, step, gamma)
         )
         assert iqm_row["iqm"] == round(float(stats.trim_mean(pooled, 0.25)), 4)  # the IQM's scores, the same
@@ -893,8 +893,7 @@ def test_runs_without_episodic_returns_are_one_error_naming_where(tmp_path):
 
 
 PAPER_DROPOUT_FIGURE = ROOT.parent / "shared" / "paper" / "fig_continuous_dropout0.1.png"
-sys.path.insert(0, str(ROOT / "paper_study" / "data"))
-import read_dropout_figure as reader
+from paper_study.data import read_dropout_figure as reader
 
 
 @pytest.mark.skipif(
@@ -948,8 +947,7 @@ def test_dropout_tables_set_our_cells_beside_the_readings(tmp_path):
 
 # --- two sweeps of one grid (paper_study/compare_sweeps.py) -----------------------------------------
 
-sys.path.insert(0, str(ROOT / "paper_study"))
-import compare_sweeps
+from paper_study import compare_sweeps
 
 
 def test_two_sweeps_are_compared_cell_by_cell(tmp_path):
