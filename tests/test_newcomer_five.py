@@ -23,7 +23,8 @@ import eval_gamma_sweep as sweep
 import plot_results as plots
 import ppo_pgg_discrete
 import reproduce
-from paper_study import aggregate, figures
+from paper_study import aggregate as aggregation
+from paper_study import figures
 from pgg_utils import cells, checkpoints, rundir, runs
 from pgg_utils.arguments import answer_cleanrl_habits
 from pgg_utils.checks import env_error
@@ -145,7 +146,9 @@ def test_aggregates_on_a_task_the_paper_did_not_run_normalise_by_the_sweeps_own_
             "for MyTask-v0")  # fmt: skip
     assert f"Scores normalised per task: {said}." in (tmp_path / "out" / "aggregate_iqm.md").read_text()
     summary = summary_of(tmp_path / "episodes.csv")
-    assert said in figures.aggregate_intervals(aggregation.aggregate_iqm(summary), "discrete", said).axes[0].get_xlabel()
+    assert (
+        said in figures.aggregate_intervals(aggregation.aggregate_iqm(summary), "discrete", said).axes[0].get_xlabel()
+    )
     assert (tmp_path / "out" / "performance_profile_discrete.png").exists()
 
 

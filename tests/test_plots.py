@@ -15,7 +15,8 @@ from conftest import ROOT
 from scipy import stats
 
 import plot_results as plots
-from paper_study import aggregate, figures, paper
+from paper_study import aggregate as aggregation
+from paper_study import figures, paper
 from paper_study.figures import PAPER_DROPOUT_FIGURE_YLIM
 from paper_study.stats import (
     bootstrap_coverage,
