@@ -6,14 +6,10 @@ CleanRL's `ppo_continuous_action.py` plus one learnable *null embedding* that st
     pi_hat(a|s) ∝ N(a; mu_null, σ)^(1-guidance) · N(a; mu_s, σ)^guidance
                = N(a; (1-guidance)·mu_null + guidance·mu_s, σ)          (shared σ, exactly)
 
-drives rollouts, the PPO ratio and the entropy. `guidance` is the PGG strength γ of the paper; the
-discount factor is `discount`, never "gamma". With --guidance 1 --cond-dropout 0 this script runs
-CleanRL's PPO algorithm with CleanRL's defaults and one fix: the observation-normalisation statistics
-live inside the agent, so every checkpoint carries them and evaluates on the scale it was trained on
-(CleanRL issue 425). What else differs from CleanRL's `ppo_continuous_action.py` is listed, one line
-each, in the README's "What differs from CleanRL"; `benchmarks/compare_cleanrl.py` compares the
-learning curves with CleanRL's own script. Lines that differ from PPO are marked `# PGG`. Run
-management (run directories, checkpoints, resume, progress) is in `pgg_utils.runs`.
+drives rollouts, the PPO ratio and the entropy. `guidance` is the PGG strength γ; the discount factor
+is `discount`. With --guidance 1 --cond-dropout 0 this is CleanRL's PPO with CleanRL's defaults, the
+observation statistics inside the agent (CleanRL issue 425); what else differs: the README's "What
+differs from CleanRL". Lines that differ from PPO are marked `# PGG`; run management is in pgg_utils.
 
     python ppo_pgg_continuous.py --env-id Hopper-v4 --guidance 1.1
     python ppo_pgg_continuous.py --env-id Hopper-v4 --guidance 1.1 --resume   # continue a stopped run
@@ -32,21 +28,20 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import torch
-import tyro
 from torch import nn
 
-from pgg_utils import loading, runs, spaces, tasks, training_state
-from pgg_utils.arguments import RunArgs, answer_cleanrl_habits
+from pgg_utils import loading, runs, tasks, training_state
+from pgg_utils.arguments import RunArgs
 from pgg_utils.distributions import Gaussian, guide  # PGG: guide, the mix of the branches' parameters
-from pgg_utils.fast import evaluation_network, flatten_parameters, numpy_network
+from pgg_utils.fast import branch_scale, evaluation_network, flatten_parameters, numpy_network
 from pgg_utils.guidance import GuidanceArgs, GuidanceSchedule, uses_null_branch  # PGG
 from pgg_utils.normalisation import NormalizeClipReward, RunningObsNorm
 from pgg_utils.policy import (
     PathError,
     branch_pass,
-    eval_mode,
     first_ratio_error,
     frozen,
+    guidance_diagnostics,  # PGG
     guided_actions,  # PGG
     null_pass,  # PGG
     numpy_policy,
@@ -56,6 +51,7 @@ from pgg_utils.policy import (
     refuse,
     trained_parameters,
 )
+from pgg_utils.rollout import Rollout, flatten_rollout
 
 ACTION_SPACE = "continuous"  # the checkpoints' kind; the sweep picks this script by it
 
@@ -107,13 +103,11 @@ class Args(GuidanceArgs, RunArgs):  # PGG: --guidance, its schedule and --cond-d
 
 
 def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None = None):
-    """The task as the agent sees it, for training, the sweep and --video alike. Every reported return (training's
-    charts/episodic_return, the sweep's) is the task's own, recorded by tasks.task_env on gym.make's env, below each
-    wrapper added here: reward shaping, a reward scale or a frame stack wraps `env` in `thunk`, and shapes what the
-    agent trains on, never what is reported (a fork that means to report a shaped return says so in task_env's
-    `below_record`). With `video_dir`, RecordVideo records there; `render_mode` is gym.make's."""
+    """The task as the agent sees it, for training, the sweep and --video alike. A wrapper added to `env` here
+    (reward shaping, a frame stack) shapes what the agent trains on, never the reported return: tasks.task_env
+    records the task's own below it. With `video_dir`, RecordVideo records there; `render_mode` is gym.make's."""
 
-    def thunk():
+    def thunk() -> gym.Env:
         # FlattenObservation changes no reward: under the recorder, where the checkpoints' env state has always had it.
         env = tasks.task_env(env_id, video_dir, render_mode, below_record=(gym.wrappers.FlattenObservation,))
         return env
@@ -121,24 +115,10 @@ def make_env(env_id: str, video_dir: Path | None = None, render_mode: str | None
     return thunk
 
 
-def make_vector_env(
-    env_id: str, num_envs: int, seed: int, discount: float, reward_clip: float, video_dir: Path | None = None
-) -> gym.vector.VectorEnv:
-    """Vector env that resets a finished sub-env within the same step (the gym 0.29 convention GAE below relies on).
-    Episode statistics are recorded on raw rewards, in make_env; observations come out raw (the agent normalises them,
-    RunningObsNorm). The wrappers sit on each sub-env, as in CleanRL, cheaper than gymnasium 1.4's vector versions.
-    With `video_dir`, the first sub-env's episodes are recorded there (CleanRL's schedule: episodes 0, 1, 8, 27, ...)."""
-
-    def training_env(video_dir: Path | None):
-        env = gym.wrappers.ClipAction(make_env(env_id, video_dir)())
-        return NormalizeClipReward(env, discount, reward_clip)
-
-    envs = gym.vector.SyncVectorEnv(
-        [lambda i=i: training_env(video_dir if i == 0 else None) for i in range(num_envs)],
-        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
-    )
-    envs.action_space.seed(seed)
-    return envs
+def training_env(env: gym.Env, discount: float, reward_clip: float) -> gym.Env:
+    """Training's own wrappers around make_env's task (the sweep acts without them): CleanRL's action clipping and
+    reward normalisation."""
+    return NormalizeClipReward(gym.wrappers.ClipAction(env), discount, reward_clip)
 
 
 def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
@@ -148,14 +128,9 @@ def layer_init(layer, std=np.sqrt(2), bias_const=0.0):
 
 
 class Agent(nn.Module):
-    """Actor and critic work on normalised observations; `obs_norm(raw)` produces them. Change the
-    networks here: the rollouts' numpy copy and the evaluation follow the modules (pgg_utils/fast.py).
-    The action distribution is `guided_policy`'s, the one place that defines it.
-
-    The rest of the project calls these methods (AGENT_METHODS, checked when training starts):
-    `get_value` and `policy` (the loss), `branches` (the diagnostics), `null_logstd` and
-    `unconditional_mean` (the rollouts, the sweep), `acting_policy` (`act`, pgg_utils/bc_null.py),
-    `act` (the sweep, users) and `reset` (the sweep, at each episode's start)."""
+    """Actor and critic work on normalised observations (`obs_norm`). Change the networks here: the rollouts'
+    numpy copy and the evaluation follow the modules (pgg_utils/fast.py); the action distribution is
+    `guided_policy`'s. The methods the rest of the project calls: AGENT_METHODS."""
 
     def __init__(self, obs_dim: int, action_dim: int, obs_clip=10.0, null_dims=None, action_bounds=None):  # PGG
         super().__init__()
@@ -175,17 +150,15 @@ class Agent(nn.Module):
         )
         self.actor_logstd = nn.Parameter(torch.zeros(1, action_dim))
         self.obs_norm = RunningObsNorm(obs_dim, obs_clip)
-        # The null embedding, a normalised-observation-shaped input that means "no state". Zeros are
-        # the running mean observation, a neutral "average state", and draw nothing from the RNG, so
-        # every other weight is initialised exactly as in PPO with the same seed.
+        # The null embedding, an input that means "no state". Zeros (the running mean observation) draw
+        # nothing from the RNG: every other weight is initialised exactly as in PPO with the same seed.
         self.null_obs = nn.Parameter(torch.zeros(obs_dim))  # PGG
         # With null_dims the embedding replaces those dimensions only (a goal): pi(a|s, null) is then
         # a policy of the rest of the state, computed per row.
         self.null_mask = None if null_dims is None else torch.zeros(obs_dim, dtype=torch.bool)  # PGG
         if null_dims is not None:  # PGG
             self.null_mask[list(null_dims)] = True  # PGG
-        # The task's action bounds (low, high) that actions are clipped to when acting; not trained.
-        self.action_bounds = action_bounds
+        self.action_bounds = action_bounds  # (low, high) that `act` clips to; not trained
         self.obs_shape = (obs_dim,)  # what `act` takes
 
     def get_value(self, obs: torch.Tensor) -> torch.Tensor:
@@ -195,8 +168,7 @@ class Agent(nn.Module):
         """Begins an episode: a recurrent actor clears its state here (this one holds none)."""
 
     def null_input(self, obs):  # PGG
-        """The actor's input of the unconditional branch: one row (the whole observation nulled), or one
-        per row of `obs` with the null_dims replaced (torch tensors or numpy arrays)."""
+        """The unconditional branch's input: one row (all nulled), or `obs` with the null_dims replaced (torch or numpy)."""
         if self.null_mask is None:  # PGG
             return self.null_obs.unsqueeze(0) if torch.is_tensor(obs) else self.null_obs.detach().numpy()[None]  # PGG
         if torch.is_tensor(obs):  # PGG
@@ -212,42 +184,36 @@ class Agent(nn.Module):
         return null_pass(self.actor_mean, self.null_obs.unsqueeze(0))[0]  # PGG
 
     def branches(self, obs: torch.Tensor, drop_mask=None) -> tuple["Gaussian", "Gaussian"]:  # PGG
-        """pi(.|s) and pi(.|null) for a batch `obs` (B, obs_dim) of normalised observations; `drop_mask`
-        (bool, (B,)) replaces those rows' conditional branch by the unconditional one."""
+        """pi(.|s) and pi(.|null) for a batch `obs` (B, obs_dim); `drop_mask` (bool, (B,)) nulls those rows' pi(.|s)."""
         mean_cond, mean_null = branch_pass(self.actor_mean, obs, self.null_input(obs))  # PGG
         if drop_mask is not None:  # PGG
             mean_cond = torch.where(drop_mask.unsqueeze(-1), mean_null, mean_cond)  # PGG
         return Gaussian(mean_cond, self.actor_logstd), Gaussian(mean_null, self.null_logstd())  # PGG
 
     def policy(self, obs: torch.Tensor, guidance: torch.Tensor | float | None, drop_mask=None) -> "Gaussian":  # PGG
-        """pi_hat(.|obs) for a batch of normalised observations, the loss's. `guidance` None means a run
-        without guidance: PPO's own actor pass (the null embedding gets no gradient), still through guided_policy
-        (at 1, the conditional branch in both places: exactly pi(.|s)), so a changed distribution changes it too."""
+        """pi_hat(.|obs), the loss's. `guidance` None: PPO's own actor pass (the null embedding gets no gradient), still
+        through guided_policy (at 1, exactly pi(.|s)), so that a changed distribution changes it too."""
         if guidance is None and drop_mask is None:  # PGG
             cond = Gaussian(self.actor_mean(obs), self.actor_logstd)
             return guided_policy(cond, cond, 1.0)  # PGG
         return guided_policy(*self.branches(obs, drop_mask), 1.0 if guidance is None else guidance)  # PGG
 
     def acting_policy(self, raw_obs: np.ndarray, guidance, mean_null=None):  # PGG
-        """pi_hat for a batch of raw observations, in numpy (`act` samples from it), by the fast path (FastPolicy);
-        `mean_null` where the caller holds the unconditional mean."""
+        """pi_hat for a batch of raw observations, in numpy (`act` samples from it), by FastPolicy."""
         fast = FastPolicy(self, acting=True, mean_null=mean_null)  # PGG
         return fast.distribution(self.obs_norm.normalise(raw_obs), guidance)  # PGG
 
     @torch.no_grad()
     def act(self, raw_obs, guidance=1.0, deterministic: bool = False, noise=None, mean_null=None, seed=None) -> np.ndarray:  # PGG  # fmt: skip
         """Actions of pi_hat at `guidance` (a number, or one per row) for raw observations (one, or a batch), as the
-        sweep acts: sampled with standard normal `noise` shaped like the actions (if None: drawn from torch's generator,
-        or from one seeded by `seed`, an int or a numpy Generator), or the mode if `deterministic`, clipped to the
-        task's bounds; `mean_null` where the caller holds it. ValueError, one line, for an input training would refuse,
-        or a noise not finite or not of that shape (pgg_utils.policy.guided_actions)."""
+        sweep acts: sampled with standard normal `noise` (None: drawn, from a generator seeded by `seed` if given),
+        or the mode if `deterministic`, clipped to the task's bounds (pgg_utils.policy.guided_actions)."""
         raw = np.asarray(raw_obs, dtype=np.float64)
         draw = lambda pi: torch.randn(pi.mode().shape).numpy()  # standard normal, from torch's generator
         return guided_actions(self, raw, guidance, deterministic, noise, mean_null, draw, seed)  # PGG
 
     def predict(self, raw_obs, state=None, episode_start=None, deterministic: bool = False, guidance=1.0):  # PGG
-        """Stable-Baselines3's `model.predict`: (`act`'s actions, None), the None its recurrent state (this actor
-        holds none; `state` and `episode_start` are taken and left unused, as SB3's feed-forward policies do)."""
+        """Stable-Baselines3's `model.predict`: (`act`'s actions, None); `state` and `episode_start` unused, as SB3's."""
         return self.act(raw_obs, guidance, deterministic), None  # PGG
 
 
@@ -265,35 +231,26 @@ AGENT_METHODS = {
 
 
 def make_agent(args: dict, shapes: dict) -> Agent:
-    """The agent of a run from its training arguments and the task's shapes (checkpoint_shapes): the one
+    """The agent of a run from its training arguments and the task's shapes (spaces.checkpoint_shapes): the one
     constructor of training and of checkpoint loading, so an argument added to the network reaches both."""
     bounds = (np.asarray(shapes["action_low"], np.float32), np.asarray(shapes["action_high"], np.float32))
     return Agent(shapes["obs_dim"], shapes["action_dim"], args["obs_clip"], args.get("null_dims"), bounds)  # PGG
 
 
 def guided_policy(cond: "Gaussian", null: "Gaussian", guidance) -> "Gaussian":  # PGG
-    """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution: the loss,
-    the rollouts' numpy copy (checked against it when training starts) and `act` all take it from here.
-    For Gaussians the natural parameters mix, precision (1-γ)/σ_null² + γ/σ_s² and precision·mean
-    likewise; with one σ for both branches (this Agent's) that is the mean mix `guide` with σ unchanged,
-    computed so. Torch tensors or numpy arrays (`guidance` then a number or one per row). A fork that
-    changes the distribution (σ per branch, a squashed Gaussian, a Beta) changes this function; its distribution
-    has Gaussian's methods (mode, sample and sample_log_prob of noise, log_prob, entropy, kl)."""
+    """pi_hat ∝ pi(.|null)^(1-γ) · pi(.|s)^γ, the one definition of the action distribution (the loss, the rollouts
+    and `act` take it from here). The natural parameters mix; with one σ for both branches that is the mean mix
+    `guide`, σ unchanged. Torch or numpy; a fork's distribution has Gaussian's methods."""
     return Gaussian(guide(cond.mean, null.mean, guidance), cond.logstd, cond.std)  # PGG
 
 
-# --- the behaviour policy, in numpy --------------------------------------------------------------
-# Torch's per-call dispatch made up most of a rollout step: numpy networks derived from the modules (fast.py) made
-# training ~1.3x faster, with the same float32 arithmetic (benchmarks/README.md; agreement: tests/test_equivalence.py).
+# --- the behaviour policy, in numpy: ~1.3x faster training than torch's per-call dispatch, same float32 arithmetic
 
 
 class FastPolicy:
-    """pi_hat and the critic in numpy, derived from the agent's modules and guided_policy (pgg_utils/policy.py): the
-    one fast path of every actor, beside the loss's torch. For a rollout (`FastPolicy(agent, guidance)`): the networks'
-    numpy copies on views of the weights (fixed until the update), σ by numpy's exp, pi(.|null) cached: build one per
-    rollout. For `act` (`acting=True`: the sweep, videos, cloning, tracking): the modules' own forward, whose rounding
-    does not depend on the batch's other rows (fast.evaluation_network), σ by torch's exp: the bits every committed
-    sweep holds. `mean_null` where the caller holds the unconditional mean."""
+    """pi_hat and the critic in numpy, derived from the agent's modules and guided_policy. For a rollout: numpy
+    copies on views of the weights, pi(.|null) cached, one per rollout. For `act` (`acting=True`): the modules' own
+    forward, rounded independently of the batch's other rows (pgg_utils/fast.py)."""
 
     def __init__(self, agent: Agent, guidance=None, acting: bool = False, mean_null=None):  # PGG
         network = evaluation_network if acting else numpy_network
@@ -325,47 +282,13 @@ class FastPolicy:
         return self.critic(obs)[:, 0]
 
 
-def branch_scale(logstd: torch.Tensor, acting: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(log σ, σ) of a branch, (action_dim,): for a rollout, copies (its parameters, not live views) with numpy's exp;
-    for `act`, views with torch's exp (their bits differ in the last place; each is what its runs and sweeps hold)."""
-    logstd = logstd.detach()
-    if acting:
-        return logstd.numpy()[0], logstd.exp()[0].numpy()
-    copy = logstd.numpy()[0].copy()
-    return copy, np.exp(copy)
-
-
 # --- rollout, GAE, loss, update ------------------------------------------------------------------
 
 
-@dataclass
-class Rollout:
-    obs: torch.Tensor  # (num_steps, num_envs, obs_dim), normalised with the statistics of that moment
-    actions: torch.Tensor  # (num_steps, num_envs, action_dim), before clipping to the action space
-    logprobs: torch.Tensor  # (num_steps, num_envs), log pi_hat(a|s) at collection time
-    rewards: torch.Tensor  # (num_steps, num_envs), normalised and clipped
-    dones: torch.Tensor  # (num_steps, num_envs): 1 where obs[t] is the first observation of an episode
-    values: torch.Tensor  # (num_steps, num_envs)
-
-    @classmethod
-    def empty(cls, num_steps: int, num_envs: int, obs_dim: int, action_dim: int) -> "Rollout":
-        zeros = lambda *shape: torch.zeros(shape)
-        return cls(
-            obs=zeros(num_steps, num_envs, obs_dim),
-            actions=zeros(num_steps, num_envs, action_dim),
-            logprobs=zeros(num_steps, num_envs),
-            rewards=zeros(num_steps, num_envs),
-            dones=zeros(num_steps, num_envs),
-            values=zeros(num_steps, num_envs),
-        )
-
-
 def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout, on_episode, global_step: int):
-    """Fills `buf` with num_steps transitions from the guided policy, updating the observation
-    statistics as it goes, and returns the (normalised obs, done) numpy arrays to start the next
-    rollout from. `on_episode(return, length, step)` is called per finished episode with its raw
-    (unnormalised) return and the global step at which it ended (CleanRL's logging step);
-    `global_step` is the step count before this rollout."""
+    """Fills `buf` (a pgg_utils.rollout.Rollout) with num_steps transitions from the guided policy, updating the
+    observation statistics, and returns the (normalised obs, done) to start the next rollout from. `on_episode(return,
+    length, step)` is called per finished episode, at the global step it ended (CleanRL's logging step)."""
     # Numpy views of the buffers: a write costs a fraction of a torch indexing call.
     obs_buf, dones_buf, actions_buf, logprobs_buf, values_buf, rewards_buf = (
         t.numpy() for t in (buf.obs, buf.dones, buf.actions, buf.logprobs, buf.values, buf.rewards)
@@ -392,9 +315,8 @@ def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout,
 
 
 def compute_gae(buf: Rollout, next_value: np.ndarray, next_done: np.ndarray, discount: float, gae_lambda: float):
-    """Generalized advantage estimation; returns (advantages, returns) as tensors, each (num_steps,
-    num_envs). The loop over time runs in numpy: a handful of operations on num_envs numbers per step,
-    the same float32 arithmetic as torch's at a fraction of its per-call cost."""
+    """Generalized advantage estimation: (advantages, returns), each (num_steps, num_envs). In numpy: torch's
+    float32 arithmetic at a fraction of its per-call cost."""
     rewards, values, dones = buf.rewards.numpy(), buf.values.numpy(), buf.dones.numpy()
     num_steps = rewards.shape[0]
     advantages = np.zeros_like(rewards)
@@ -425,11 +347,9 @@ def null_bc_loss(agent: Agent, obs: torch.Tensor, actions: torch.Tensor, route: 
 
 
 def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_mask, guidance, args: Args):  # PGG
-    """PPO's clipped objective on the rows `mb_inds` of `batch` (the flattened rollout), with pi_hat in
-    place of pi. `guidance`: γ_train (a float, or under --compile a 0-d tensor, an input of the compiled
-    graph, so a new value compiles nothing), or None for a run without guidance. Returns (loss, stats);
-    the stats are detached tensors, not floats, so that the compiled version (--compile) runs without a
-    break back to Python."""
+    """PPO's clipped objective on the rows `mb_inds` of `batch` (flatten_rollout's), with pi_hat in place of pi.
+    `guidance`: γ_train (under --compile a 0-d tensor: a new value compiles nothing), or None without guidance.
+    Returns (loss, stats), the stats detached tensors: --compile's graph has no break back to Python."""
     mb_obs = batch["obs"][mb_inds]
     pi = agent.policy(mb_obs, guidance, drop_mask)  # PGG
     newlogprob = pi.log_prob(batch["actions"][mb_inds])
@@ -494,18 +414,6 @@ def minibatch_loss(agent: Agent, batch: dict[str, torch.Tensor], mb_inds, drop_m
     }
 
 
-def flatten_rollout(buf: Rollout, advantages, returns) -> dict[str, torch.Tensor]:
-    """The rollout as one batch of rows, the layout `minibatch_loss` reads."""
-    return {
-        "obs": buf.obs.reshape(-1, buf.obs.shape[-1]),
-        "actions": buf.actions.reshape(-1, buf.actions.shape[-1]),
-        "logprobs": buf.logprobs.reshape(-1),
-        "advantages": advantages.reshape(-1),
-        "returns": returns.reshape(-1),
-        "values": buf.values.reshape(-1),
-    }
-
-
 def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_fn=minibatch_loss):  # PGG
     """PPO's epochs over one rollout (a Rollout); `loss_fn` is `minibatch_loss` or its compiled version. Returns the
     last minibatch's statistics, the clip fraction and PGG's averaged over every minibatch, as floats."""
@@ -544,34 +452,17 @@ def ppo_update(agent, optimizer, buf, advantages, returns, args, guidance, loss_
     return stats
 
 
-@torch.no_grad()  # PGG
-def guidance_diagnostics(agent: Agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:  # PGG
-    """How far guidance moves the policy (KL(pi_hat || pi_s), which the adaptive schedule holds near its
-    target), and what the unconditional branch has learned; in eval mode, so no statistics move."""
-    with eval_mode(agent):  # PGG
-        cond, null = agent.branches(obs)  # PGG
-        kl = guided_policy(cond, null, guidance).kl(cond).mean().item()  # PGG
-        stats = {"pgg/guidance": guidance, "pgg/kl_guided_vs_conditional": kl}  # PGG: γ_train of this iteration
-        stats["pgg/unconditional_mean_norm"] = agent.unconditional_mean().norm().item()  # PGG
-    if isinstance(null_obs := getattr(agent, "null_obs", None), torch.Tensor):  # PGG: a fork may have a null head
-        stats["pgg/null_embedding_norm"] = null_obs.norm().item()  # PGG
-    return stats  # PGG
-
-
-# --- training ------------------------------------------------------------------------------------
-
-
 def train(args: Args, run: runs.Run) -> None:
     """Trains one agent, writing TensorBoard events and checkpoints into `run.dir`. With --resume it
     continues from the last checkpoint bit for bit: the checkpoint holds the optimizer, the sub-envs
     mid-episode, the next observation and every RNG state."""
+    script = sys.modules[__name__]  # this file's module: a fork's checks read the fork's own code
     resumed = run.checkpoint_to_resume()
     training_state.seed_everything(args)
 
-    envs = make_vector_env(
-        args.env_id, args.num_envs, args.seed, args.discount, args.reward_clip, run.video_dir(resumed)
-    )
-    shapes, error = tasks.trained_task(sys.modules[__name__], args.env_id, envs)  # make_env's task, as swept
+    wrap = lambda env: training_env(env, args.discount, args.reward_clip)
+    envs = tasks.make_vector_env(make_env, args.env_id, args.num_envs, args.seed, run.video_dir(resumed), wrap)
+    shapes, error = tasks.trained_task(script, args.env_id, envs)  # make_env's task, as swept
     if error:
         refuse(error, envs)
     if len(envs.single_action_space.shape) != 1:
@@ -584,7 +475,7 @@ def train(args: Args, run: runs.Run) -> None:
     probe = probe_observations(envs.single_observation_space)
     noise = np.random.default_rng(1).standard_normal((len(probe), action_dim)).astype(np.float32)
     probed = randomised(agent)
-    if error := path_error(sys.modules[__name__], probed, args, probe, probed.obs_norm.normalise, noise):
+    if error := path_error(script, probed, args, probe, probed.obs_norm.normalise, noise):
         refuse(error, envs)
     writer = run.open_writer(resumed)
     guided = uses_null_branch(args)  # PGG
@@ -603,18 +494,10 @@ def train(args: Args, run: runs.Run) -> None:
     schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim, action_dim)
 
-    raw_obs, _ = envs.reset(seed=args.seed)
-    next_obs = agent.obs_norm.observe(raw_obs)  # the statistics count the first observation too
-    next_done = np.zeros(args.num_envs, dtype=np.float32)
-    first_iteration, global_step = 1, 0
-    if resumed is not None:
-        agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
-        optimizer.load_state_dict(resumed["resume"]["optimizer"])
-        schedule.load_state_dict(resumed["resume"].get("guidance"))  # PGG
-        first_iteration, global_step, next_obs, next_done = run.restore(resumed, envs)
-        if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
-            raw_obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
-            next_obs, next_done = agent.obs_norm.observe(raw_obs), np.zeros(args.num_envs, dtype=np.float32)
+    # envs.reset(seed=args.seed), the statistics counting the first observation too; or the checkpoint's state.
+    start = run.start_or_resume(resumed, envs, agent.obs_norm.observe, agent, optimizer)
+    first_iteration, global_step, next_obs, next_done = start
+    schedule.load_state_dict(resumed["resume"].get("guidance") if resumed else None)  # PGG: an adaptive γ_train's
     marks = run.start_progress(global_step, batch_size, num_iterations)
 
     try:
@@ -636,7 +519,7 @@ def train(args: Args, run: runs.Run) -> None:
             loss_guidance = (torch.tensor(guidance) if scheduled else guidance) if guided else None  # PGG
             stats = ppo_update(agent, optimizer, buf, advantages, returns, args, loss_guidance, loss_fn)  # PGG
             first_ratio_error(agent, stats)  # the loss, before its first step, gave the rollout's log-probs
-            stats.update(guidance_diagnostics(agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
+            stats.update(guidance_diagnostics(script, agent, buf.obs.reshape(-1, obs_dim), guidance))  # PGG
             schedule.observe(stats)  # PGG: the adaptive rule's step
             stats["charts/action_std_mean"] = agent.actor_logstd.exp().mean().item()
             stats["charts/learning_rate"] = optimizer.param_groups[0]["lr"]
@@ -646,7 +529,7 @@ def train(args: Args, run: runs.Run) -> None:
 
             while marks and global_step >= marks[0]:
                 # The trained weights, before they are saved: `act` (the sweep's) and the rollouts still act as the loss.
-                if error := path_error(sys.modules[__name__], agent, args, probe, agent.obs_norm.normalise, noise):
+                if error := path_error(script, agent, args, probe, agent.obs_norm.normalise, noise):
                     raise PathError(f"at step {global_step:,}: {error}")
                 resume = training_state.resume_state(iteration, optimizer, envs, next_obs, next_done, schedule)  # PGG
                 run.save(marks.popleft(), global_step, agent.state_dict(), shapes, resume)
@@ -654,33 +537,12 @@ def train(args: Args, run: runs.Run) -> None:
         envs.close()
 
 
-def checkpoint_shapes(task: gym.Env) -> dict:
-    """What a checkpoint records of the spaces of `task`, the env make_env makes: its own action bounds (the
-    training envs' ClipAction has ±inf ones); `task_spaces`, the contract whatever evaluates the checkpoint compares
-    with its task (pgg_utils/spaces.py)."""
-    action_space = task.action_space
-    return {
-        "obs_dim": int(task.observation_space.shape[0]),
-        "action_dim": int(action_space.shape[0]),
-        "action_low": action_space.low.tolist(),
-        "action_high": action_space.high.tolist(),
-        "task_spaces": spaces.describe(task.observation_space, action_space),
-    }
-
-
-def agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint") -> Agent:
-    """The agent, in eval mode, of a loaded checkpoint dict (of any readable format), by this script's make_agent."""
-    return loading.agent_from_checkpoint(sys.modules[__name__], ckpt, source)
-
-
-def load_checkpoint(path) -> tuple[Agent, dict]:
-    """(agent in eval mode, the checkpoint dict) from a checkpoint file, by this script's make_agent."""
-    return loading.load_checkpoint(sys.modules[__name__], path)
+# agent, ckpt = load_checkpoint(path): this script's checkpoints, loaded by its own make_agent (a fork's by the fork's).
+agent_from_checkpoint, load_checkpoint = loading.script_loaders(sys.modules[__name__])
 
 
 def main() -> None:
-    args = tyro.cli(Args, description=__doc__, args=answer_cleanrl_habits(sys.argv[1:]))
-    runs.launch(args, ACTION_SPACE, __file__, train)
+    runs.launch_from_command_line(Args, __doc__, ACTION_SPACE, __file__, train)
 
 
 if __name__ == "__main__":

@@ -17,6 +17,7 @@ import torch
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
+from pgg_utils import spaces, tasks
 from pgg_utils.policy import path_error, probe_observations
 
 ROUNDS = 5
@@ -26,11 +27,9 @@ def bench(module, env_id: str) -> None:
     torch.set_num_threads(1)
     args = module.Args(env_id=env_id, guidance=1.1)
     continuous = module is ppo_pgg_continuous
-    if continuous:
-        envs = module.make_vector_env(env_id, args.num_envs, args.seed, args.discount, args.reward_clip)
-    else:
-        envs = module.make_vector_env(env_id, args.num_envs, args.seed)
-    shapes = module.checkpoint_shapes(module.make_env(env_id)())
+    wrap = (lambda env: module.training_env(env, args.discount, args.reward_clip)) if continuous else None
+    envs = tasks.make_vector_env(module.make_env, env_id, args.num_envs, args.seed, wrap=wrap)
+    shapes = spaces.checkpoint_shapes(module.make_env(env_id)())
     agent = module.make_agent(asdict(args), shapes)
     obs_dim = envs.single_observation_space.shape[0]
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)

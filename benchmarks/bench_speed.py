@@ -48,6 +48,7 @@ import tyro
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
+from pgg_utils import tasks
 from pgg_utils.checkpoints import latest_checkpoint
 from pgg_utils.runs import train_in_process
 
@@ -84,9 +85,10 @@ def env_rates(module, env_id: str, train_args, steps: int = 20_000, repeats: int
     actions = np.stack([env.action_space.sample() for _ in range(1000)])
     num_envs = train_args.num_envs
     if module is ppo_pgg_discrete:
-        envs = module.make_vector_env(env_id, num_envs, 0)
+        envs = tasks.make_vector_env(module.make_env, env_id, num_envs, 0)
     else:
-        envs = module.make_vector_env(env_id, num_envs, 0, train_args.discount, train_args.reward_clip)
+        wrap = lambda env: module.training_env(env, train_args.discount, train_args.reward_clip)
+        envs = tasks.make_vector_env(module.make_env, env_id, num_envs, 0, wrap=wrap)
     batched_actions = np.stack([np.roll(actions, k, axis=0) for k in range(num_envs)], axis=1)
 
     def single() -> float:

@@ -113,6 +113,17 @@ def evaluation_network(network: nn.Module):
     return lambda x: evaluation_forward(network, x)
 
 
+def branch_scale(logstd: torch.Tensor, acting: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(log σ, σ) of a Gaussian branch, (action_dim,): for a rollout, copies (its parameters, not live views) with
+    numpy's exp; for `act`, views with torch's exp (their bits differ in the last place; each is what its runs and
+    sweeps hold)."""
+    logstd = logstd.detach()
+    if acting:
+        return logstd.numpy()[0], logstd.exp()[0].numpy()
+    copy = logstd.numpy()[0].copy()
+    return copy, np.exp(copy)
+
+
 def standard_gumbel(uniform: np.ndarray) -> np.ndarray:
     """Standard Gumbel noise, in the dtype of `uniform` (samples in [0, 1); a 0 is raised to float32's
     smallest normal number, so the logarithms stay finite): argmax(logits + noise) is an exact

@@ -1,5 +1,5 @@
 """A training script's agent from its checkpoint: the one loader behind both scripts' `agent_from_checkpoint` and
-`load_checkpoint`, so that a fork's loads with the fork's own `make_agent` and the same checks."""
+`load_checkpoint` (`script_loaders`), so that a fork's loads with the fork's own `make_agent` and the same checks."""
 
 from pathlib import Path
 
@@ -28,3 +28,18 @@ def load_checkpoint(script, path) -> tuple:
         raise FileNotFoundError(f"no such checkpoint file: {path}{relative}")
     ckpt = checkpoints.read_checkpoint_file(path)
     return script.agent_from_checkpoint(ckpt, path), ckpt
+
+
+def script_loaders(script) -> tuple:
+    """(agent_from_checkpoint, load_checkpoint) of `script`, a training script's module: the two above, bound to it,
+    as the script exposes them (`agent, ckpt = ppo_pgg_continuous.load_checkpoint(path)`)."""
+
+    def script_agent_from_checkpoint(ckpt: dict, source: str | Path = "checkpoint"):
+        """The agent, in eval mode, of a loaded checkpoint dict (of any readable format), by this script's make_agent."""
+        return agent_from_checkpoint(script, ckpt, source)
+
+    def script_load_checkpoint(path) -> tuple:
+        """(agent in eval mode, the checkpoint dict) from a checkpoint file, by this script's make_agent."""
+        return load_checkpoint(script, path)
+
+    return script_agent_from_checkpoint, script_load_checkpoint

@@ -12,8 +12,8 @@ the loss, the rollouts' numpy copy and `Agent.act` all call it. This module hold
 - the null branch of an actor whose training mode couples rows or moves statistics (BatchNorm) or draws noise
   (Dropout): computed on its own, in eval mode (`branch_pass`, `null_pass`), so it needs no batch and moves nothing;
 - `missing_methods`: the methods of `Agent` that the rest of the project calls;
-- `guided_actions`, `Agent.act`'s body (its input checks, the noise's among them, sampling, clipping), and
-  `trained_parameters`, whether the null embedding trains."""
+- `guided_actions`, `Agent.act`'s body (its input checks, the noise's among them, sampling, clipping),
+  `trained_parameters`, whether the null embedding trains, and `guidance_diagnostics`, what training logs of it."""
 
 import copy
 import math
@@ -340,6 +340,24 @@ def noise_error(noise: np.ndarray, drawn: tuple, single: bool) -> str | None:
     if not np.isfinite(noise).all():
         return "noise holds a NaN or an infinity"
     return None
+
+
+@torch.no_grad()
+def guidance_diagnostics(script, agent, obs: torch.Tensor, guidance: float) -> dict[str, float]:
+    """How far guidance moves the policy of `script` (KL(pi_hat || pi_s), which the adaptive schedule holds near its
+    target; `guidance` is this iteration's γ_train), and what the unconditional branch has learned; in eval mode,
+    so no statistics move."""
+    with eval_mode(agent):
+        cond, null = agent.branches(obs)
+        kl = script.guided_policy(cond, null, guidance).kl(cond).mean().item()
+        stats = {"pgg/guidance": guidance, "pgg/kl_guided_vs_conditional": kl}
+        if script.ACTION_SPACE == "continuous":
+            stats["pgg/unconditional_mean_norm"] = agent.unconditional_mean().norm().item()
+        else:
+            stats["pgg/entropy_unconditional"] = null.entropy().sum().item()
+    if isinstance(null_obs := getattr(agent, "null_obs", None), torch.Tensor):  # a fork may have a null head
+        stats["pgg/null_embedding_norm"] = null_obs.norm().item()
+    return stats
 
 
 def trained_parameters(agent, guided: bool, probe_loss) -> list:

@@ -1,7 +1,8 @@
 """A training run, once for both scripts: `Run` prepares its directory by the overwrite and resume
-rules, locked while it trains, writes its checkpoints and logs; `launch` is a script's `main` after
-parsing. The checks before it (checks.py), the checkpoint format (checkpoints.py), the RNG and env
-state a checkpoint holds (training_state.py) and the directory's records (rundir.py) live by job."""
+rules, locked while it trains, starts or resumes it, writes its checkpoints and logs; `launch` is a
+script's `main` after parsing (`launch_from_command_line`, with it). The checks before it (checks.py),
+the checkpoint format (checkpoints.py), the RNG and env state a checkpoint holds (training_state.py)
+and the directory's records (rundir.py) live by job."""
 
 import json
 import math
@@ -17,6 +18,7 @@ import numpy as np
 import torch
 
 from pgg_utils import scripts
+from pgg_utils.arguments import answer_cleanrl_habits
 from pgg_utils.checkpoints import (
     CHECKPOINT_FORMAT_VERSION,
     CheckpointError,
@@ -278,6 +280,22 @@ class Run:
         set_rng_state(state["rng"])
         return state["iteration"] + 1, resumed["global_step"], next_obs, next_done
 
+    def start_or_resume(self, resumed: dict | None, envs, observe, agent, optimizer) -> tuple:
+        """(first iteration, global step, next obs, next done): the sub-envs reset with the run's seed, the first
+        observation as `observe` gives it to the actor; with `resumed`, the agent (in place), the optimizer, the
+        sub-envs and the RNGs as that checkpoint left them."""
+        raw_obs, _ = envs.reset(seed=self.args.seed)
+        next_obs, next_done = observe(raw_obs), np.zeros(self.args.num_envs, dtype=np.float32)
+        if resumed is None:
+            return 1, 0, next_obs, next_done
+        agent.load_state_dict(resumed["model"])  # in place, into the optimizer's flat buffer
+        optimizer.load_state_dict(resumed["resume"]["optimizer"])
+        first_iteration, global_step, next_obs, next_done = self.restore(resumed, envs)
+        if next_obs is None:  # a task whose own state a checkpoint cannot hold: fresh episodes
+            raw_obs, _ = envs.reset()  # from the restored RNGs, not another seed's episodes
+            next_obs, next_done = observe(raw_obs), np.zeros(self.args.num_envs, dtype=np.float32)
+        return first_iteration, global_step, next_obs, next_done
+
     def start_progress(self, global_step: int, batch_size: int, num_iterations: int) -> deque:
         """Starts the progress display; returns the checkpoint marks still ahead of `global_step`."""
         self.progress = Progress("training", num_iterations * batch_size, global_step, unit="steps")
@@ -373,6 +391,15 @@ def task_failure(error: BaseException) -> str | None:
         return None
     message = f"{type(error).__name__}: {str(error).splitlines()[0]}" if str(error) else type(error).__name__
     return f"the task raised {message}, in its {next(c for c in calls if c in ('step', 'reset'))}()"
+
+
+def launch_from_command_line(args_class, description: str, kind: str, script: str, train) -> None:
+    """A training script's `main`: its `Args` parsed by tyro from the command line (CleanRL's flags typed from
+    habit answered first: arguments.answer_cleanrl_habits), then `launch`."""
+    import tyro
+
+    args = tyro.cli(args_class, description=description, args=answer_cleanrl_habits(sys.argv[1:]))
+    launch(args, kind, script, train)
 
 
 def launch(args, kind: str, script: str, train) -> None:

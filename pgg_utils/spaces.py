@@ -10,6 +10,19 @@ import gymnasium as gym
 import numpy as np
 
 
+def checkpoint_shapes(task: gym.Env) -> dict:
+    """What a checkpoint records of the spaces of `task`, the env a script's make_env makes: the sizes its
+    make_agent reads (a Box action's own bounds: the training envs' ClipAction has ±inf ones), and `task_spaces`,
+    the contract whatever evaluates the checkpoint compares with its task."""
+    obs_space, action_space = task.observation_space, task.action_space
+    if isinstance(action_space, gym.spaces.Discrete):
+        sizes = {"obs_dim": int(obs_space.shape[0]), "n_actions": int(action_space.n)}
+    else:
+        sizes = {"obs_dim": int(obs_space.shape[0]), "action_dim": int(action_space.shape[0]),
+                 "action_low": action_space.low.tolist(), "action_high": action_space.high.tolist()}  # fmt: skip
+    return {**sizes, "task_spaces": describe(obs_space, action_space)}
+
+
 def describe(observation_space: gym.Space, action_space: gym.Space) -> dict:
     """The spaces as plain data: the observation's shape; a Discrete action's n and start, a Box action's shape
     and bounds."""

@@ -1,7 +1,7 @@
 """The task as the training scripts and the sweep make it, written once: gym.make's env with its own returns recorded
 directly on it (`task_env`, on which each script's `make_env` builds), the episodes a vector step ended
-(`ended_episodes`), what a script's vector env must be to train, checkpoint, resume and be swept
-(`vector_env_error`), and the task's shapes a checkpoint records (`trained_task`)."""
+(`ended_episodes`), the training scripts' vector env (`make_vector_env`), what a vector env must be to train,
+checkpoint, resume and be swept (`vector_env_error`), and the task's shapes a checkpoint records (`trained_task`)."""
 
 import gymnasium as gym
 import numpy as np
@@ -50,6 +50,21 @@ def ended_episodes(infos: dict) -> list[tuple[float, int]]:
     return [(float(episodes["r"][i]), int(episodes["l"][i])) for i in np.flatnonzero(ended[f"_{TASK_EPISODE}"])]
 
 
+def make_vector_env(make_env, env_id: str, num_envs: int, seed: int, video_dir=None, wrap=None) -> gym.vector.VectorEnv:
+    """A training script's vector env: `num_envs` sub-envs of `make_env`'s task, each wrapped by `wrap` (env -> env:
+    what training alone adds, the continuous script's action clipping and reward normalisation), in one process
+    (checkpoints hold every sub-env's state), resetting a finished sub-env within the same step (the gym 0.29
+    convention GAE relies on). With `video_dir`, the first sub-env's episodes are recorded there (CleanRL's schedule:
+    episodes 0, 1, 8, 27, ...)."""
+    wrap = wrap or (lambda env: env)
+    envs = gym.vector.SyncVectorEnv(
+        [lambda i=i: wrap(make_env(env_id, video_dir if i == 0 else None)()) for i in range(num_envs)],
+        autoreset_mode=gym.vector.AutoresetMode.SAME_STEP,
+    )
+    envs.action_space.seed(seed)
+    return envs
+
+
 def vector_env_error(envs, task: gym.Env) -> str | None:
     """Why a training script cannot train on `envs`, what its make_vector_env returns, in one line that says what to
     do; None where it can. A checkpoint holds every sub-env's state, so that a run resumes exactly: only a
@@ -78,12 +93,12 @@ def vector_env_error(envs, task: gym.Env) -> str | None:
 
 
 def trained_task(script, env_id: str, envs) -> tuple[dict | None, str | None]:
-    """(the shapes a checkpoint records, `script.checkpoint_shapes` of the env `script.make_env` makes, as the sweep
+    """(the shapes a checkpoint records, spaces.checkpoint_shapes of the env `script.make_env` makes, as the sweep
     makes it; None, the one line that refuses training): a vector env that cannot train, checkpoint, resume and be
     swept, or observations the scripts' networks cannot take, is refused before the shapes are read."""
     task = script.make_env(env_id)()
     try:
         error = vector_env_error(envs, task) or spaces.observation_shape_error(env_id, envs.single_observation_space)
-        return (None, error) if error else (script.checkpoint_shapes(task), None)
+        return (None, error) if error else (spaces.checkpoint_shapes(task), None)
     finally:
         task.close()

@@ -16,9 +16,15 @@ torch.set_num_threads(1)
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import runs
+from pgg_utils import runs, tasks
 
 SCRIPTS = {"discrete": ppo_pgg_discrete, "continuous": ppo_pgg_continuous}
+
+
+def training_vector_env(module, env_id: str, num_envs: int, seed: int):
+    """The vector env `module`'s train makes, at the default discount and reward clip."""
+    wrap = (lambda env: module.training_env(env, 0.99, 10.0)) if module is ppo_pgg_continuous else None
+    return tasks.make_vector_env(module.make_env, env_id, num_envs, seed, wrap=wrap)
 
 
 def small_args(kind: str, tmp_path, **overrides):

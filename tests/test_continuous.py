@@ -7,7 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, assert_minibatch_loss_is_cleanrls, small_args, train
+from conftest import ROOT, assert_minibatch_loss_is_cleanrls, small_args, train, training_vector_env
 from torch.distributions import Normal
 
 import ppo_pgg_continuous as pgg
@@ -146,7 +146,7 @@ def test_episodes_are_reported_with_raw_returns_at_the_step_they_end():
     autoreset), recorded before reward normalisation: InvertedPendulum pays 1 per step. Each episode
     is logged at the global step at which it ended, as CleanRL does; with one sub-env that is the
     running sum of the episode lengths."""
-    envs = pgg.make_vector_env("InvertedPendulum-v4", 1, seed=0, discount=0.99, reward_clip=10.0)
+    envs = training_vector_env(pgg, "InvertedPendulum-v4", 1, seed=0)
     obs, _ = envs.reset(seed=0)
     buf = pgg.Rollout.empty(200, 1, 4, 1)
     torch.manual_seed(0)
@@ -173,7 +173,7 @@ def test_observation_statistics_are_cleanrls_across_episode_ends(monkeypatch):
         )
     )
     monkeypatch.setattr(pgg, "make_env", short)
-    envs = pgg.make_vector_env("Hopper-v4", 1, seed=3, discount=0.99, reward_clip=10.0)
+    envs = training_vector_env(pgg, "Hopper-v4", 1, seed=3)
     agent = pgg.Agent(11, 3)
     policy = pgg.FastPolicy(agent, 1.0)
     buf = pgg.Rollout.empty(400, 1, 11, 3)
@@ -272,7 +272,7 @@ def test_short_inverted_pendulum_run_learns(tmp_path):
 def test_paper_task_steps_through_env_factory(env_id):
     if env_id == "Pusher-v4" and checks.argument_error(pgg.Args(env_id=env_id), "continuous") is not None:
         pytest.skip("Pusher-v4 needs mujoco<3, which is not installed")
-    envs = pgg.make_vector_env(env_id, 2, seed=0, discount=0.99, reward_clip=10.0)
+    envs = training_vector_env(pgg, env_id, 2, seed=0)
     obs, _ = envs.reset(seed=0)
     agent = pgg.Agent(obs.shape[1], envs.single_action_space.shape[0])
     policy = pgg.FastPolicy(agent, 1.1)

@@ -4,7 +4,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import assert_minibatch_loss_is_cleanrls, small_args, train
+from conftest import assert_minibatch_loss_is_cleanrls, small_args, train, training_vector_env
 from torch import nn
 from torch.distributions import Categorical
 
@@ -191,7 +191,7 @@ def test_rollout_buffer_at_episode_boundaries(monkeypatch):
     lengths = [3, 5]
     countdown = lambda: gym.wrappers.RecordEpisodeStatistics(CountdownEnv(lengths.pop(0)), stats_key=TASK_EPISODE)
     monkeypatch.setattr(pgg, "make_env", lambda env_id, video_dir=None: countdown)
-    envs = pgg.make_vector_env("unused", 2, seed=0)
+    envs = training_vector_env(pgg, "unused", 2, seed=0)
     obs, _ = envs.reset(seed=0)
     buf = pgg.Rollout.empty(7, 2, 2)
     episodes = []

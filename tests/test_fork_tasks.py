@@ -19,10 +19,14 @@ PENDULUM = {"env_id": "Pendulum-v1", "total_timesteps": 768, "checkpoint_interva
             "num_minibatches": 4, "update_epochs": 2}  # fmt: skip
 
 
-def write_fork(folder: Path, original: str, addition: str, name: str | None = None) -> Path:
-    """A copy of a training script with `addition` (code that redefines make_env or make_vector_env) before its
-    `if __name__ == "__main__":`, as a fork edits it; imported as its own module."""
+def write_fork(folder: Path, original: str, addition: str, name: str | None = None, edits: dict | None = None) -> Path:
+    """A copy of a training script with `addition` (code that redefines make_env, or defines a vector env) before
+    its `if __name__ == "__main__":`, and `edits` (old text: new) made, as a fork edits it; imported as its own
+    module."""
     source = (ROOT / original).read_text()
+    for old, new in (edits or {}).items():
+        assert source.count(old) == 1
+        source = source.replace(old, new)
     main = 'if __name__ == "__main__":\n'
     assert source.count(main) == 1
     path = folder / (name or f"fork_{original}")
@@ -184,7 +188,10 @@ def test_a_vector_env_that_cannot_checkpoint_resume_or_report_the_tasks_return_s
     finished sub-env at its next step (today: trains with GAE across episodes and logs no episode) stop in one line
     that says what to do, before a step is taken or anything but args.json is written."""
     code, message = VECTOR_ENVS[vector_env]
-    fork = write_fork(tmp_path / "fork", "ppo_pgg_discrete.py", VECTOR_FORK.format(vector_env=code))
+    own_vector_env = {"tasks.make_vector_env(make_env, ": "make_vector_env("}  # train builds the fork's
+    fork = write_fork(
+        tmp_path / "fork", "ppo_pgg_discrete.py", VECTOR_FORK.format(vector_env=code), edits=own_vector_env
+    )
     with pytest.raises(SystemExit) as stopped:
         train_fork(fork, tmp_path, "discrete", run_name="refused")
     (line,) = capsys.readouterr().err.strip().splitlines()

@@ -217,7 +217,7 @@ def test_the_null_branch_moves_no_batch_norm_statistics(kind):
     obs = torch.randn(16, 4)
     with torch.no_grad():  # the rollouts and the diagnostics move nothing
         module.FastPolicy(agent, 1.5).act(obs.numpy(), np.zeros((16, 3), np.float32))
-        module.guidance_diagnostics(agent, obs, 1.5)
+        policy.guidance_diagnostics(module, agent, obs, 1.5)
     assert all(torch.equal(value, norm.state_dict()[name]) for name, value in before.items())
     getattr(agent, network)(obs)  # PPO's update: the batch alone moves the statistics
     batch_alone = norm.running_mean.clone()

@@ -16,7 +16,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, small_args, train
+from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, small_args, train, training_vector_env
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
@@ -158,13 +158,13 @@ def test_env_state_without_task_state_keeps_the_wrapper_statistics(monkeypatch):
     """Such a task is marked incomplete (a resumed run starts fresh episodes), but its wrappers'
     statistics, here the reward scale, are still saved and restored."""
     monkeypatch.setattr(ppo_pgg_continuous, "make_env", lambda env_id, video_dir=None: Drift)
-    envs = ppo_pgg_continuous.make_vector_env("Drift", 1, seed=0, discount=0.99, reward_clip=10.0)
+    envs = training_vector_env(ppo_pgg_continuous, "Drift", 1, seed=0)
     envs.reset(seed=0)
     for _ in range(5):
         envs.step(np.full((1, 1), 0.5, np.float32))
     states = training_state.env_state(envs)
     assert states[0]["complete"] is False
-    fresh = ppo_pgg_continuous.make_vector_env("Drift", 1, seed=0, discount=0.99, reward_clip=10.0)
+    fresh = training_vector_env(ppo_pgg_continuous, "Drift", 1, seed=0)
     fresh.reset(seed=1)
     training_state.restore_env_state(fresh, states)
     saved, restored = (next(w for w in training_state.wrapper_chain(e.envs[0]) if isinstance(w, ppo_pgg_continuous.NormalizeClipReward))
