@@ -212,17 +212,17 @@ def training_curves(run_paths) -> tuple[dict, list[tuple[str, Path, str]]]:
     name. Only whole runs are drawn: a run whose events hold no episodic returns (missing or damaged) or
     end before its total_timesteps (cut or damaged events, or an unfinished run), or that has no readable
     checkpoint, is left out and named (incomplete_run); one whose args.json disagrees with its
-    checkpoints is refused (rundir.record_error)."""
+    checkpoints is refused (runs.record_error)."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from pgg_utils import checkpoints, rundir  # torch: only where --runs is given
+    from pgg_utils import checkpoints, runs  # torch: only where --runs is given
 
     found, left_out = [], []  # (configuration, seed, steps, returns, run directory); (env, run directory, why)
     fields = {}  # configuration -> its label's fields
     for args_file in run_args_files(run_paths):
         run_dir = args_file.parent
         ckpt = checkpoints.last_readable(run_dir)[1]
-        if error := rundir.record_error(run_dir, ckpt):
+        if error := runs.record_error(run_dir, ckpt):
             raise InputError(error)
         run_args = ckpt["args"] if ckpt else json.loads(args_file.read_text())
         # A resumed run's events overlap the first session's past its checkpoint: the reader drops them,

@@ -27,7 +27,7 @@ import plot_results
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from paper_study import paper
-from pgg_utils import checkpoints, fast, files, identity, rundir, runs, scripts
+from pgg_utils import checkpoints, fast, files, identity, runs, scripts
 from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
 from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
 from pgg_utils.identity import FROZEN_DEFAULTS, GOAL_DIMS
@@ -89,7 +89,7 @@ def test_a_scheduled_run_resumes_bit_for_bit_and_refuses_another_schedule(tmp_pa
     if schedule == "adaptive":
         assert a["resume"]["guidance"] == b["resume"]["guidance"]
     changed = replace(args, guidance_final=1.2) if schedule == "linear" else replace(args, guidance_kl_target=2e-4)
-    with pytest.raises(rundir.RunDirError, match="other arguments"):
+    with pytest.raises(runs.RunDirError, match="other arguments"):
         train(ppo_pgg_discrete, replace(changed, run_name="stopped", resume=True))
 
 

@@ -25,7 +25,7 @@ import ppo_pgg_discrete
 import reproduce
 from paper_study import aggregate as aggregation
 from paper_study import figures
-from pgg_utils import cells, checkpoints, rundir, runs
+from pgg_utils import cells, checkpoints, runs
 from pgg_utils.arguments import answer_cleanrl_habits
 from pgg_utils.checks import env_error
 from pgg_utils.files import MANIFEST, read_csv, read_manifest, sha256_of
@@ -229,7 +229,7 @@ def test_resume_on_a_folder_holding_another_runs_checkpoint_names_the_checkpoint
     theirs = train(ppo_pgg_discrete, replace(args, seed=2))
     foreign = checkpoints.checkpoint_path(mine, 1024)
     shutil.copy(checkpoints.checkpoint_path(theirs, 1024), foreign)
-    with pytest.raises(rundir.RunDirError) as refused:
+    with pytest.raises(runs.RunDirError) as refused:
         runs.Run.prepare(replace(args, resume=True), "discrete", Path(ppo_pgg_discrete.__file__))
     assert str(refused.value) == (
         f"{foreign} is not this run's checkpoint: it was written by run {theirs.name} (seed 2 -> 1: as recorded -> "

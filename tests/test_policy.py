@@ -18,7 +18,7 @@ from torch import nn
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import checkpoints, policy, rundir, scripts
+from pgg_utils import checkpoints, policy, runs, scripts
 
 # --- a fork that mixes σ per branch: the one place ---------------------------------------------------
 
@@ -148,7 +148,7 @@ def test_a_fork_that_edits_one_path_alone_stops_before_training_in_one_line(tmp_
         train(module, args)
     err = capsys.readouterr().err.strip().splitlines()
     assert stopped.value.code == 2 and len(err) == 1 and err[0].startswith(f"error: {message} on a probe batch")
-    assert not list((tmp_path / "runs" / "one_path").glob(rundir.EVENTS_GLOB))  # nothing written to start again over
+    assert not list((tmp_path / "runs" / "one_path").glob(runs.EVENTS_GLOB))  # nothing written to start again over
 
 
 @pytest.mark.slow

@@ -21,7 +21,7 @@ from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import checkpoints, checks, files, identity, progress, rundir, runs, scripts, training_state
+from pgg_utils import checkpoints, checks, files, identity, progress, runs, scripts, training_state
 from pgg_utils.files import lock_directory
 
 
@@ -94,7 +94,7 @@ def test_format_one_checkpoints_load_for_evaluation_but_do_not_resume(tmp_path):
     checkpoints.checkpoint_path(run_dir, 1024).unlink()
     agent, ckpt = ppo_pgg_discrete.load_checkpoint(path)
     assert ckpt["format_version"] == 1 and torch.equal(agent.null_obs, old["model"]["null_obs"])
-    with pytest.raises(rundir.RunDirError, match="predates resumable checkpoints"):
+    with pytest.raises(runs.RunDirError, match="predates resumable checkpoints"):
         prepare(ppo_pgg_discrete, replace(args, resume=True))
     assert path.exists()
 
@@ -213,12 +213,10 @@ def test_invalid_arguments_are_refused_before_touching_the_disk(flag, tmp_path):
 def test_finished_and_unfinished_runs_need_an_explicit_choice(tmp_path):
     args = small_args("discrete", tmp_path)
     run_dir = train(ppo_pgg_discrete, args)
-    with pytest.raises(rundir.RunDirError, match="holds a finished run: pass --overwrite"):
+    with pytest.raises(runs.RunDirError, match="holds a finished run: pass --overwrite"):
         prepare(ppo_pgg_discrete, args)
     checkpoints.checkpoint_path(run_dir, 1536).unlink()
-    with pytest.raises(
-        rundir.RunDirError, match=r"unfinished run \(last checkpoint step_000001024.pt\): pass --resume"
-    ):
+    with pytest.raises(runs.RunDirError, match=r"unfinished run \(last checkpoint step_000001024.pt\): pass --resume"):
         prepare(ppo_pgg_discrete, args)
     train(ppo_pgg_discrete, replace(args, overwrite=True, total_timesteps=512, checkpoint_interval=512))
     assert sorted(p.name for p in (run_dir / "checkpoints").iterdir()) == ["step_000000512.pt"]
@@ -427,7 +425,7 @@ def test_a_non_finite_update_stops_the_run_naming_the_iteration_and_keeps_the_fi
     ckpt = checkpoint(run_dir, 512)
     ckpt["model"]["null_obs"][0] = float("nan")
     torch.save(ckpt, checkpoints.checkpoint_path(run_dir, 512))
-    with pytest.raises(rundir.RunDirError, match="non-finite weights"):
+    with pytest.raises(runs.RunDirError, match="non-finite weights"):
         prepare(ppo_pgg_discrete, replace(args, resume=True))
 
 
@@ -439,7 +437,7 @@ def test_resume_sets_an_unreadable_last_checkpoint_aside_and_continues_from_the_
     checkpoints.checkpoint_path(stopped, 1536).unlink()
     truncated = checkpoints.checkpoint_path(stopped, 1024)
     truncated.write_bytes(truncated.read_bytes()[:1000])
-    with pytest.raises(rundir.RunDirError, match="pass --resume to continue from the last readable checkpoint"):
+    with pytest.raises(runs.RunDirError, match="pass --resume to continue from the last readable checkpoint"):
         prepare(ppo_pgg_discrete, replace(args, run_name="stopped"))
     code, error = launch(ppo_pgg_discrete, replace(args, run_name="stopped", resume=True), capsys)
     assert code == 0 and any("set aside step_000001024.pt.unreadable" in line for line in error)
@@ -511,7 +509,7 @@ def test_a_refused_resume_sets_nothing_aside(tmp_path):
     run_dir = train(ppo_pgg_discrete, args)
     last = checkpoints.checkpoint_path(run_dir, 1536)
     last.write_bytes(b"not a checkpoint")
-    with pytest.raises(rundir.RunDirError, match="other arguments"):
+    with pytest.raises(runs.RunDirError, match="other arguments"):
         prepare(ppo_pgg_discrete, replace(args, resume=True, learning_rate=0.002))
     assert last.read_bytes() == b"not a checkpoint" and not list(run_dir.rglob("*.unreadable"))
 
@@ -583,7 +581,7 @@ def test_a_fresh_start_never_deletes_a_file_the_scripts_did_not_write(tmp_path):
     (run_dir / "videos" / "holiday.mp4").write_bytes(b"mine")
     (run_dir / "events.out.tfevents.1.old").write_bytes(b"an earlier start's curve")
     with pytest.raises(
-        rundir.RunDirError, match="holds TensorBoard events of an earlier start that reached no checkpoint"
+        runs.RunDirError, match="holds TensorBoard events of an earlier start that reached no checkpoint"
     ):
         prepare(ppo_pgg_discrete, args)
     assert sorted(p.name for p in run_dir.rglob("*") if p.is_file()) == [".lock", "events.out.tfevents.1.old",
@@ -607,7 +605,7 @@ def test_resume_restarts_a_run_that_reached_no_checkpoint_only_if_it_is_the_same
     args = small_args("discrete", tmp_path, total_timesteps=512, checkpoint_interval=512, run_name="r")
     run_dir = train(ppo_pgg_discrete, args)
     checkpoints.checkpoint_path(run_dir, 512).unlink()
-    with pytest.raises(rundir.RunDirError, match=r"of a run with other arguments \(learning_rate"):
+    with pytest.raises(runs.RunDirError, match=r"of a run with other arguments \(learning_rate"):
         prepare(ppo_pgg_discrete, replace(args, resume=True, learning_rate=0.002))
     train(ppo_pgg_discrete, replace(args, resume=True))
     assert checkpoints.checkpoint_path(run_dir, 512).exists() and len(list(run_dir.glob("events.out.tfevents.*"))) == 1
@@ -620,8 +618,8 @@ def test_an_args_json_that_disagrees_with_the_checkpoints_is_refused(tmp_path):
     (run_dir / "args.json").write_text(edited)
     expected = (f"{run_dir / 'args.json'} disagrees with the run's checkpoints: env_id 'Acrobot-v1' (checkpoints: "
                 "'CartPole-v1')")  # fmt: skip
-    assert rundir.record_error(run_dir) == expected
-    with pytest.raises(rundir.RunDirError, match="disagrees with the run's checkpoints"):
+    assert runs.record_error(run_dir) == expected
+    with pytest.raises(runs.RunDirError, match="disagrees with the run's checkpoints"):
         prepare(ppo_pgg_discrete, replace(args, resume=True))
     assert (run_dir / "args.json").read_text() == edited
 
@@ -804,7 +802,7 @@ def test_a_script_that_changes_its_args_while_training_is_one_configuration_and_
     started = json.loads((straight / "args.json").read_text())
     for mark, iteration in ((512, 2), (1024, 4), (1536, 6)):
         ckpt = checkpoint(straight, mark)
-        assert rundir.as_json(ckpt["args"]) == started and ckpt["args"]["ent_coef"] == 0.01
+        assert runs.as_json(ckpt["args"]) == started and ckpt["args"]["ent_coef"] == 0.01
         assert ckpt["resume"]["changed_arguments"] == {"ent_coef": 0.01 * 0.5**iteration}
     sweep.sweep(sweep.Args(paths=(str(straight),), output=str(tmp_path / "sweep"), gammas=(1.0,), episodes=1,
                            script=(str(script),)))  # fmt: skip
