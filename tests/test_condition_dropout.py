@@ -13,15 +13,17 @@ from conftest import ROOT
 from scipy import stats
 
 from beyond import condition_dropout as cd
+from beyond import dropout_sets, figures
 from beyond import report as beyond_report
+from beyond import sets as beyond_sets
 from beyond.command_tracking import COLUMNS
 from beyond.goal_distance import COLUMNS as GOAL_COLUMNS
 from beyond.learned_null import COLUMNS as NULL_COLUMNS
 from paper_study.stats import detectable_gap
 from pgg_utils.files import write_csv_atomic
 
-CMD, REACHER = beyond_report.COMMAND_ENV, cd.GOAL_ENV
-DROP, NULL17, GOAL_DROP = cd.COMMAND_DROPOUT, beyond_report.COMMAND_NULL, cd.GOAL_DROPOUT
+CMD, REACHER = beyond_sets.COMMAND_ENV, beyond_sets.GOAL_ENV
+DROP, NULL17, GOAL_DROP = beyond_sets.COMMAND_DROPOUT, beyond_sets.COMMAND_NULL, beyond_sets.GOAL_DROPOUT
 COMMANDS = (-0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 BASE_GAMMAS, DROP_GAMMAS = (0.5, 1.0, 2.0, 3.0), (0.5, 0.8, 1.0, 2.0, 3.0)  # the dropout set has a γ more
 GOAL_GAMMAS = (1.0, 1.1, 1.2, 1.5)
@@ -99,9 +101,9 @@ def write_folder(tmp_path, drop_seeds=range(1, 6), drop_skip=(), goal=True, drop
     return folder
 
 
-def section(folder) -> tuple[str, dict, cd.Sets]:
+def section(folder) -> tuple[str, dict, dropout_sets.Sets]:
     values = []
-    sets = cd.read(folder)
+    sets = dropout_sets.read(folder)
     text = "\n".join(cd.section(sets, values))
     return text, {(v["env_id"], v["variant"], v["baseline"], v["quantity"]): v["value"] for v in values}, sets
 
@@ -160,7 +162,7 @@ def test_absent_dropout_sets_are_said_in_one_line_each_and_give_no_number(tmp_pa
         in text
     )
     assert "Not measured yet: PGG, dropout 0.1, null on dims 17 (command task)" in text
-    assert not cd.figure(sets, tmp_path / "fig.png") and not (tmp_path / "fig.png").exists()
+    assert not figures.dropout_figure(sets, tmp_path / "fig.png") and not (tmp_path / "fig.png").exists()
     assert cd.FIGURE not in text
 
 
@@ -389,12 +391,12 @@ def test_the_learned_nulls_are_tabled_with_and_without_dropout(tmp_path):
 def test_the_figure_draws_four_variants_per_band_and_on_reacher(tmp_path, monkeypatch):
     """A panel per band (5) and Reacher's, each with its four variants; the section links it."""
     drawn = []
-    real_band = cd.band
-    monkeypatch.setattr(cd, "band", lambda ax, xs, values, variant, label: drawn.append((id(ax), variant))
+    real_band = figures.band
+    monkeypatch.setattr(figures, "band", lambda ax, xs, values, variant, label: drawn.append((id(ax), variant))
                         or real_band(ax, xs, values, variant, label))  # fmt: skip
     text, _, sets = section(write_folder(tmp_path))
     path = tmp_path / "fig.png"
-    assert cd.figure(sets, path) and path.stat().st_size > 0 and f"]({cd.FIGURE})" in text
+    assert figures.dropout_figure(sets, path) and path.stat().st_size > 0 and f"]({cd.FIGURE})" in text
     panels = {}
     for ax, variant in drawn:
         panels.setdefault(ax, []).append(variant)

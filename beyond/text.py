@@ -1,0 +1,51 @@
+"""How the report writes a number or a name: percentages, points, seed lists and counts, a mean ± CI over seeds,
+a variant with the null it is guided by."""
+
+import math
+
+from beyond.sets import COMMAND_VARIANTS
+from paper_study.agreement import step_label
+from paper_study.paper import paper_name
+from pgg_utils.pooling import mean_ci95
+
+
+def pct(x: float, decimals: int = 1) -> str:
+    return "–" if math.isnan(x) else f"{100 * x:+.{decimals}f}%"
+
+
+def seed_list(seeds: list[int] | None) -> str:
+    return "n/a" if seeds is None else ", ".join(map(str, seeds)) or "none"
+
+
+def points(x: float, sign: bool = True) -> str:
+    """A difference of two percentages, in percentage points."""
+    return "–" if math.isnan(x) else f"{100 * x:{'+' if sign else ''}.1f} pts"
+
+
+def count_of(seeds: list[int] | None, of: int) -> str:
+    return "n/a" if seeds is None else f"{len(seeds)} of {of}"
+
+
+def seeds_cell(values: dict, digits: int = 2) -> str:
+    if not values:
+        return "–"
+    mean, half, _, _ = mean_ci95(list(values.values()))
+    return f"{mean:.{digits}f} ± {half:.{digits}f}" if len(values) > 1 else f"{mean:.{digits}f}"
+
+
+def command_name(variant: str) -> str:
+    """A variant of the command set as its tables name it: the paper's name and the null it is guided by."""
+    return f"{paper_name(variant)} ({COMMAND_VARIANTS[variant]})"
+
+
+def name(variant: str, nulls: dict) -> str:
+    return f"{paper_name(variant)} ({nulls[variant]})"
+
+
+def marks(steps: dict, variants: list[str]) -> str:
+    """ "At 1M" where every variant's last mark is one step, else each variant's."""
+    if len({steps[v] for v in variants}) == 1:
+        return f"At {step_label(steps[variants[0]])}"
+    return (
+        "At each variant's last mark (" + "; ".join(f"{paper_name(v)}: {step_label(steps[v])}" for v in variants) + ")"
+    )
