@@ -1,7 +1,6 @@
 """Question 3: a behaviour-cloned unconditional branch (the tables' agents with a fitted null) and cloning while
 training, each against the agents' own null or the baselines, and what these tests say."""
 
-import csv
 import math
 from pathlib import Path
 
@@ -22,6 +21,7 @@ from beyond.text import pct, points
 from paper_study.agreement import fmt, fmt_p
 from paper_study.paper import PAPER_ENVS, paper_name, variant_rank
 from paper_study.stats import ALPHA, holm, median_relative_gap, paired_test, welch_of
+from pgg_utils.files import read_csv
 from pgg_utils.identity import config_fields
 
 
@@ -47,11 +47,10 @@ def read_bc(folder: Path, args) -> tuple[dict, dict, list[tuple[str, str]], dict
     heldout = {}
     for table in (args.table_heldout, args.discrete_heldout, folder / BC_FOLDER / "heldout_gamma.csv"):
         if Path(table).exists():
-            with open(table, newline="") as f:
-                for r in csv.DictReader(f):
-                    variant = r["variant"] + (BC if config_fields(r).get("null") == "bc" else "")
-                    if step_of.get((r["env_id"], r["variant"])) == r["step"]:
-                        heldout[(r["env_id"], variant)] = r
+            for r in read_csv(Path(table)):
+                variant = r["variant"] + (BC if config_fields(r).get("null") == "bc" else "")
+                if step_of.get((r["env_id"], r["variant"])) == r["step"]:
+                    heldout[(r["env_id"], variant)] = r
     order = lambda key: (key[0] not in PAPER_ENVS["continuous"], key[0], variant_rank(key[1]))
     return means, fresh, sorted(step_of, key=order), heldout
 

@@ -1,7 +1,6 @@
 """The section "Guidance on a command": does γ set how closely an agent follows its command, and with which
 null? From results/beyond/command/tracking.csv (beyond/command_tracking.py) and the set's sweep."""
 
-import csv
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -372,8 +371,9 @@ def command_sweep_lines(base: Path, env: str) -> list[str]:
              "|---|---|" + "---|" * (len(gammas) + 1)]  # fmt: skip
     heldout = {}
     if (base / "heldout_gamma.csv").exists():
-        with open(base / "heldout_gamma.csv", newline="") as f:
-            heldout = {(r["variant"], int(r["step"])): r for r in csv.DictReader(f) if r["env_id"] == env}
+        heldout = {
+            (r["variant"], int(r["step"])): r for r in read_csv(base / "heldout_gamma.csv") if r["env_id"] == env
+        }
     for variant in variants:
         cells = cells_of(means, env, variant)
         shown = [seeds_cell(cells[(last, g)], 1) if (last, g) in cells else "–" for g in gammas]

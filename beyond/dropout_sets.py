@@ -1,15 +1,14 @@
 """What the condition-dropout section reads (Sets): the command task's tracking cells, Reacher-v4's final
 distances and the learned nulls' rows of the dropout sets and of the sets beside them; a line per file absent."""
 
-import csv
-from collections import defaultdict
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
+from beyond.cells import seed_means_of
 from beyond.command import read_tracking
 from beyond.sets import COMMAND_DROPOUT, COMMAND_FOLDER, COMMAND_SET, DROPOUT_FOLDER, GOAL_DROPOUT, GOAL_ENV, GOAL_SET
+from pgg_utils.files import read_csv
 
 LEARNED_NULL = "learned_null.csv"
 
@@ -40,17 +39,15 @@ def read_tracking_into(sets: Sets, path: Path, variants) -> None:
 
 def read_goal_into(sets: Sets, path: Path, variants) -> None:
     """Reacher's final distances of `variants` in one goal_distance.csv at each variant's last step, into `sets`."""
-    with open(path, newline="") as f:
-        rows = [r for r in csv.DictReader(f) if r["env_id"] == GOAL_ENV and r["variant"] in variants]
+    rows = [r for r in read_csv(path) if r["env_id"] == GOAL_ENV and r["variant"] in variants]
     last = {}
     for r in rows:
         last[r["variant"]] = max(last.get(r["variant"], 0), int(r["step"]))
-    episodes = defaultdict(lambda: defaultdict(list))
-    for r in rows:
-        if int(r["step"]) == last[r["variant"]]:
-            episodes[(r["variant"], float(r["eval_guidance"]))][int(r["seed"])].append(float(r["final_distance"]))
-    for key, seeds in episodes.items():
-        sets.goal[key] = {seed: (float(np.mean(d)), len(d)) for seed, d in sorted(seeds.items())}
+    rows = [r for r in rows if int(r["step"]) == last[r["variant"]]]
+    key = lambda r: (r["variant"], float(r["eval_guidance"]))
+    episodes = Counter((key(r), int(r["seed"])) for r in rows)
+    for cell, by_seed in seed_means_of(rows, key, "final_distance").items():
+        sets.goal[cell] = {seed: (mean, episodes[(cell, seed)]) for seed, mean in by_seed.items()}
     sets.goal_steps.update(last)
 
 
@@ -71,6 +68,5 @@ def read(folder: Path) -> Sets:
             sets.absent[name] = path.relative_to(folder)
     for path in (folder / COMMAND_FOLDER, folder / GOAL_ENV, dropout / COMMAND_FOLDER, dropout / GOAL_ENV):
         if (path / LEARNED_NULL).exists():
-            with open(path / LEARNED_NULL, newline="") as f:
-                sets.nulls += list(csv.DictReader(f))
+            sets.nulls += read_csv(path / LEARNED_NULL)
     return sets

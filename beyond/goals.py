@@ -1,15 +1,15 @@
 """Guidance on a goal: the final distance to the goal against γ (goal_distance.csv), each seed's change from γ = 1
 to the largest γ."""
 
-import csv
 import math
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 from scipy import stats
 
+from beyond.cells import seed_means_of
 from paper_study.stats import holm
+from pgg_utils.files import read_csv
 
 
 def read_goal_distance(folder: Path) -> dict:
@@ -17,13 +17,8 @@ def read_goal_distance(folder: Path) -> dict:
     path = folder / "goal_distance.csv"
     if not path.exists():
         return {}
-    per_seed = defaultdict(lambda: defaultdict(list))
-    with open(path, newline="") as f:
-        for r in csv.DictReader(f):
-            per_seed[(r["env_id"], r["variant"], float(r["eval_guidance"]))][int(r["seed"])].append(
-                float(r["final_distance"])
-            )
-    return {key: {seed: float(np.mean(v)) for seed, v in sorted(s.items())} for key, s in per_seed.items()}
+    key = lambda r: (r["env_id"], r["variant"], float(r["eval_guidance"]))
+    return seed_means_of(read_csv(path), key, "final_distance")
 
 
 def distance_tests(distance: dict, variants_of: dict) -> list[dict]:

@@ -2,7 +2,6 @@
 γ_train trajectories, the γ = 1 tests per mark and the pooled cells, the held-out γ, the runs that fell, the fall
 from the best γ to the largest against the baselines'; and each task's section."""
 
-import csv
 import math
 from collections import defaultdict
 from pathlib import Path
@@ -15,7 +14,7 @@ from beyond.text import pct, seed_list
 from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.paper import paper_name
 from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, welch, welch_of
-from pgg_utils.files import write_csv_atomic
+from pgg_utils.files import read_csv, write_csv_atomic
 from pgg_utils.pooling import mean_ci95
 
 TRAJECTORY_COLUMNS = ["env_id", "variant", "seed", "step", "guidance", "kl"]
@@ -46,11 +45,10 @@ def read_trajectories(folder: Path) -> dict:
     """{(env, variant): {seed: [(step, γ_train, kl)]}} from guidance_trajectory.csv, where it exists."""
     path, out = folder / "guidance_trajectory.csv", defaultdict(lambda: defaultdict(list))
     if path.exists():
-        with open(path, newline="") as f:
-            for r in csv.DictReader(f):
-                out[(r["env_id"], r["variant"])][int(r["seed"])].append(
-                    (int(r["step"]), float(r["guidance"]), float(r["kl"]))
-                )
+        for r in read_csv(path):
+            out[(r["env_id"], r["variant"])][int(r["seed"])].append(
+                (int(r["step"]), float(r["guidance"]), float(r["kl"]))
+            )
     return out
 
 
@@ -62,9 +60,7 @@ def read_heldout(folder: Path, table_heldout: Path) -> dict:
         *sorted(folder.glob(f"{BC_TRAIN_FOLDER}/*/heldout_gamma.csv")),
     ]
     for path in [*([table_heldout] if table_heldout.exists() else []), *tasks]:
-        with open(path, newline="") as f:
-            for r in csv.DictReader(f):
-                out[(r["env_id"], r["variant"], int(r["step"]))] = r
+        out.update({(r["env_id"], r["variant"], int(r["step"])): r for r in read_csv(path)})
     return out
 
 
