@@ -39,7 +39,7 @@ import tyro
 from beyond import condition_dropout, dropout_sets
 from beyond.cells import cells_of, largest_vs_best, read_rows, record, response_at_last_step, seed_means
 from beyond.cloning import bc_section, cloning_fresh_tests, cloning_section, question_3_reading, read_bc
-from beyond.command import command_section
+from beyond.command_text import command_section
 from beyond.figures import (
     bc_figure,
     command_figure,

@@ -1,10 +1,12 @@
 """How the report writes a number or a name: percentages, points, seed lists and counts, a mean ± CI over seeds,
-a variant with the null it is guided by."""
+a variant with the null it is guided by; and `fill`, which writes a sentence of the report from its template and
+the numbers of the tables it quotes."""
 
 import math
+import string
 
 from beyond.sets import COMMAND_VARIANTS
-from paper_study.agreement import step_label
+from paper_study.agreement import fmt_p, step_label
 from paper_study.paper import paper_name
 from pgg_utils.pooling import mean_ci95
 
@@ -49,3 +51,23 @@ def marks(steps: dict, variants: list[str]) -> str:
     return (
         "At each variant's last mark (" + "; ".join(f"{paper_name(v)}: {step_label(steps[v])}" for v in variants) + ")"
     )
+
+
+class _Sentence(string.Formatter):
+    """Python's format specs, and the report's own: `:p` a p value as the tables write it (agreement.fmt_p), `:gs` a
+    list of numbers as "0.5, 1, 2" ("none" for an empty list), `:pct` a fraction as a signed percentage."""
+
+    def format_field(self, value, spec: str) -> str:
+        if spec == "p":
+            return fmt_p(value)
+        if spec == "gs":
+            return ", ".join(f"{x:g}" for x in value) or "none"
+        if spec == "pct":
+            return pct(value)
+        return super().format_field(value, spec)
+
+
+def fill(template: str, **values) -> str:
+    """A sentence of the report: `template`'s fields filled from `values`, the numbers of the tables it quotes (looked
+    up, never computed here), with the format specs of _Sentence."""
+    return _Sentence().format(template, **values)

@@ -1,4 +1,4 @@
-"""The command task's section of "Beyond the paper" (beyond/command.py), on a synthetic set: the real
+"""The command task's section of "Beyond the paper" (beyond/command.py, beyond/command_text.py), on a synthetic set: the real
 one is trained by results/beyond/command/run_all.sh."""
 
 import csv
@@ -7,8 +7,7 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: F401  (puts the repository on sys.path)
 
-from beyond import command as command_report
-from beyond import figures
+from beyond import command_text, figures
 from beyond import sets as beyond_sets
 from beyond.command_tracking import COLUMNS
 from paper_study import agreement
@@ -51,7 +50,7 @@ def section(tmp_path, rows) -> tuple[str, dict]:
     if rows is not None:
         write_csv_atomic(folder / "command" / "tracking.csv", COLUMNS, rows)
     values = []
-    text = "\n".join(command_report.command_section(folder, values))
+    text = "\n".join(command_text.command_section(folder, values))
     return text, {(v["variant"], v["baseline"], v["quantity"]): v["value"] for v in values}
 
 
