@@ -20,7 +20,7 @@ from beyond.sets import BASELINES, BC, BC_FOLDER, BC_TRAIN_FOLDER, CLONING_VARIA
 from beyond.text import pct, points
 from paper_study.agreement import fmt, fmt_p
 from paper_study.paper import PAPER_ENVS, paper_name, variant_rank
-from paper_study.stats import ALPHA, holm, median_relative_gap, paired_test, welch_of
+from paper_study.stats import holm, median_relative_gap, paired_test, welch_of
 from pgg_utils.files import read_csv
 from pgg_utils.identity import config_fields
 
@@ -277,93 +277,3 @@ def cloning_rows(tests: list[dict], quantities: tuple[str, ...], values_out: lis
                     f"{fmt(t['return'])} | {fmt(t['baseline_return'])} | {fmt_p(t['return_p'])} "
                     f"({fmt_p(t['return_p_holm'])}) |")  # fmt: skip
     return rows
-
-
-def question_3_reading(values_out: list[dict]) -> list[str]:
-    """Question 3's verdicts, each no more than its test, written from the numbers the section's tables recorded:
-    the fitted null's fall and return tests, its cells' gap (no test), and cloning while training on fresh episodes."""
-    value = {(r["env_id"], r["variant"], r["baseline"], r["quantity"]): r["value"] for r in values_out}
-    envs = list(dict.fromkeys(r["env_id"] for r in values_out if r["variant"] == "ppo" + BC))
-
-    def tested(env, variant, baseline, kind):
-        return (env, variant, baseline, f"{kind} p Holm") in value
-
-    def sig(env, variant, baseline, kind):
-        return value[(env, variant, baseline, f"{kind} p Holm")] < ALPHA
-
-    def p_text(env, variant, baseline, kind):
-        return (f"p {fmt_p(value[(env, variant, baseline, kind + ' p')])}, "
-                f"Holm {fmt_p(value[(env, variant, baseline, kind + ' p Holm')])}")  # fmt: skip
-
-    lines = []
-    ppo_bc = "ppo" + BC
-    falls = [e for e in envs if tested(e, ppo_bc, "ppo", "fall")]
-    smaller = [
-        e for e in falls if sig(e, ppo_bc, "ppo", "fall") and value[(e, ppo_bc, "ppo", "fall difference (pts)")] > 0
-    ]
-    others = [e for e in falls if e not in smaller]
-    if falls:
-
-        def fall_of(e):
-            return (f"{e} {value[(e, ppo_bc, 'ppo', 'fall difference (pts)')]:+.1f} points, "
-                    f"{p_text(e, ppo_bc, 'ppo', 'fall')}")  # fmt: skip
-
-        unused = [e for e in smaller if value.get((e, ppo_bc, "question 3", "best γ")) == 1.0]
-        lines.append(f"- **The fitted null and PPO's knob.** Scored on fresh episodes, γ falls less from its best value "
-                     f"to the largest with the cloned null than with PPO's untrained one on {len(smaller)} of "
-                     f"{len(falls)} tasks ({'; '.join(fall_of(e) for e in smaller) or 'none'}); not on the others "
-                     f"({'; '.join(fall_of(e) for e in others)}), where a negative difference is a larger fall."
-                     + (f" On {', '.join(unused)} the cloned null's best γ is 1 (no guidance): its smaller fall is "
-                        "from γ = 1, not from a γ at which guidance helped." if unused else ""))  # fmt: skip
-    returns = [e for e in envs if tested(e, ppo_bc, "ppo", "return")]
-    if returns:
-
-        def return_of(e):
-            return (
-                f"{e} {value[(e, ppo_bc, 'ppo', 'return difference at best γ')]:+.1f}, "
-                f"{p_text(e, ppo_bc, 'ppo', 'return')}, detectable {value[(e, ppo_bc, 'ppo', 'return detectable')]:.0f}"
-            )
-
-        gaps = [e for e in envs if (e, ppo_bc, "ppo", "median gap (%)") in value
-                and value[(e, ppo_bc, "ppo", "median gap low (%)")] > 0]  # fmt: skip
-        gap_text = "; ".join(f"{e} {value[(e, ppo_bc, 'ppo', 'median gap (%)')]:+.1f}% "
-                             f"[{value[(e, ppo_bc, 'ppo', 'median gap low (%)')]:+.1f}, "
-                             f"{value[(e, ppo_bc, 'ppo', 'median gap high (%)')]:+.1f}]" for e in gaps)  # fmt: skip
-        lines.append("- **Return, PPO's agents.** Tested at each side's best γ only, on fresh episodes: "
-                     f"{sum(sig(e, ppo_bc, 'ppo', 'return') for e in returns)} of {len(returns)} tests survive Holm "
-                     f"({'; '.join(return_of(e) for e in returns)}), so a "
-                     "difference below the detectable one is not ruled out. Over the sweep's γ ≠ 1 cells the cloned "
-                     f"null's returns lie above the untrained null's on {', '.join(gaps) or 'no task'} (median gap "
-                     f"{gap_text or '–'}), a gap with no test of its own: the cells share their seeds.")  # fmt: skip
-    own = "pgg_g1.1"
-    trained = [e for e in envs if tested(e, own + BC, own, "return")]
-    if trained:
-        costs = [e for e in trained if sig(e, own + BC, own, "return")]
-        lines.append(f"- **In place of a trained null.** For the γ_train 1.1 agents, {len(costs)} of {len(trained)} "
-                     "return tests at the best γ survive Holm: "
-                     + ("; ".join(f"{e} {value[(e, own + BC, own, 'return difference at best γ')]:+.1f} "
-                                  f"({p_text(e, own + BC, own, 'return')})" for e in costs) or "none")
-                     + ". That is the evidence that the cloned null does not replace a trained one, on those tasks "
-                     "alone.")  # fmt: skip
-    cloning = [(e, b) for (e, v, b, q) in value if v in CLONING_VARIANTS and q == "fresh fall p Holm"]
-    if cloning:
-
-        def fresh_fall(e, b):
-            v = next(iter(CLONING_VARIANTS))
-            return (
-                f"{e} {value[(e, v, b, 'fresh fall difference (pts)')]:+.1f} points, "
-                f"{p_text(e, v, b, 'fresh fall')}, detectable {value[(e, v, b, 'fresh fall detectable (pts)')]:.1f}"
-            )
-
-        variant = next(iter(CLONING_VARIANTS))
-        parts = []
-        for baseline in BASELINES:
-            sided = [(e, b) for e, b in cloning if b == baseline]
-            significant = [(e, b) for e, b in sided if value[(e, variant, b, "fresh fall p Holm")] < ALPHA]
-            parts.append(f"than {paper_name(baseline)} on {len(significant)} of {len(sided)} tasks "
-                         f"({'; '.join(fresh_fall(e, b) for e, b in sided)})")  # fmt: skip
-        lines.append("- **Cloning while training.** On fresh episodes, with each side's best γ chosen on the sweep, "
-                     f"the cloning variant's fall is smaller {parts[0]}; and {parts[1]}, the comparison that isolates "
-                     "the cloning (the same γ_train). Where no test survives Holm, 5 seeds detect only differences "
-                     "of the size shown.")  # fmt: skip
-    return ["### Question 3: what these tests say, and no more", "", *lines, ""] if lines else []

@@ -38,7 +38,7 @@ import tyro
 
 from beyond import condition_dropout, dropout_sets
 from beyond.cells import cells_of, largest_vs_best, read_rows, record, response_at_last_step, seed_means
-from beyond.cloning import bc_section, cloning_fresh_tests, cloning_section, question_3_reading, read_bc
+from beyond.cloning import bc_section, cloning_fresh_tests, cloning_section, read_bc
 from beyond.command_text import command_section
 from beyond.figures import (
     bc_figure,
@@ -49,6 +49,7 @@ from beyond.figures import (
     trajectory_figure,
 )
 from beyond.goals import distance_tests, read_goal_distance
+from beyond.question_3 import question_3_reading
 from beyond.schedules import (
     collapsed,
     comparisons,
