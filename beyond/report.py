@@ -29,7 +29,6 @@ committed CSV is read. A run "fell" where its return at the last step is below h
 γ = 1, and at its best eval γ of each mark.
 """
 
-import math
 from collections import defaultdict
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,7 +36,7 @@ from pathlib import Path
 import tyro
 
 from beyond import condition_dropout, dropout_sets
-from beyond.cells import cells_of, largest_vs_best, read_rows, record, response_at_last_step, seed_means
+from beyond.cells import read_rows, seed_means
 from beyond.cloning import bc_section, cloning_fresh_tests, cloning_section, read_bc
 from beyond.command_text import command_section
 from beyond.figures import (
@@ -48,15 +47,14 @@ from beyond.figures import (
     gamma_response_figure,
     trajectory_figure,
 )
-from beyond.goals import distance_tests, read_goal_distance
+from beyond.glance import glance_section
+from beyond.goals import read_goal_distance
 from beyond.question_3 import question_3_reading
 from beyond.schedules import (
-    collapsed,
     comparisons,
     fall_tests,
     read_heldout,
     read_trajectories,
-    scheduled_tasks,
     task_section,
     write_trajectories,
 )
@@ -66,12 +64,9 @@ from beyond.sets import (
     BEYOND_VARIANT_IDS,
     CLONING_VARIANTS,
     COMMAND_FOLDER,
-    GOAL_VARIANTS,
     SETS_APART,
 )
-from beyond.text import count_of, pct, points
-from paper_study.agreement import fmt, fmt_p
-from paper_study.paper import paper_name, variant_rank
+from paper_study.paper import variant_rank
 from paper_study.stats import holm
 from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic
 
@@ -97,99 +92,6 @@ REPORT_COLUMNS = ["env_id", "variant", "baseline", "step", "mean", "sd", "baseli
 
 
 VALUE_COLUMNS = ["env_id", "variant", "baseline", "quantity", "value"]
-
-
-def glance_section(means: dict, variants_of: dict, distance: dict, gamma_one_p: list[float],
-                   values_out: list[dict]) -> list[str]:  # fmt: skip
-    """One table per question, the numbers the verdicts rest on; each task's section below has the rest."""
-    lines = ["## At a glance", ""]
-    scheduled = scheduled_tasks(variants_of)
-    if scheduled:
-        lines += [("Did scheduling or adapting γ_train remove the fall past a modest γ? At the last mark, from the "
-                  "means over seeds: the return at γ = 1, the best eval γ, the largest γ swept and how far its mean "
-                  "lies below the best's; and the runs whose return fell below half their best mark's, at γ = 1 and "
-                  "at their best eval γ of each mark. The best γ is chosen on these same episodes, which makes "
-                  "every variant's fall a little larger than a fresh sweep would."), "",
-                  ("| task | variant | γ = 1 | best γ: return | largest γ: return | largest vs best | fell at γ = 1 | "
-                  "fell at its best γ |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        for env in scheduled:
-            for variant in (v for v in variants_of[env] if v not in GOAL_VARIANTS | CLONING_VARIANTS):
-                gammas, values = response_at_last_step(means, env, variant)
-                cells = cells_of(means, env, variant)
-                if 1.0 not in gammas or any(math.isnan(v) for v in values):
-                    continue  # a variant not swept at every γ of the task's last step
-                (best, drop), at_one = largest_vs_best(values), values[gammas.index(1.0)]
-                seeds = len(cells[(max(s for s, g in cells), 1.0)])
-                fell = [collapsed(cells), collapsed(cells, every_gamma=True)]
-                for quantity, value in (("return at γ 1", at_one), ("best γ", gammas[best]),
-                                        ("return at best γ", values[best]), ("largest γ", gammas[-1]),
-                                        ("return at largest γ", values[-1]), ("largest γ vs best (%)", 100 * drop),
-                                        ("seeds", seeds), *((f"fell at {at}", len(f)) for at, f in
-                                                            zip(("γ 1", "best γ"), fell) if f is not None)):  # fmt: skip
-                    record(values_out, env, variant, "", quantity, value)
-                lines.append(f"| {env} | {paper_name(variant)} | {at_one:.1f} | {gammas[best]:g}: {values[best]:.1f} | "
-                             f"{gammas[-1]:g}: {values[-1]:.1f} | {pct(drop)} | {count_of(fell[0], seeds)} | "
-                             f"{count_of(fell[1], seeds)} |")  # fmt: skip
-        falls = fall_tests(means, variants_of, gamma_one_p)
-        lines += ["", ("Is the fall smaller than the baselines'? Each seed's fall at the last mark from its variant's best "
-                  "γ (above) to the largest, relative to its return at the best γ, and the mean of these falls (not "
-                  f"the ratio of means above); against each baseline's, Welch's t test (Holm over these {len(falls)} "
-                  f"tests alone, and over them with the report's {len(gamma_one_p)} γ = 1 tests), and the difference "
-                  "in falls one test detects with 80% power at α = 0.05, before Holm. A negative difference is a "
-                  "larger fall than the baseline's. A variant whose best γ lies nearer the largest has less room to "
-                  "fall: the best γ of each side is shown."), "",
-                  ("| task | variant | baseline | best γ (baseline's) | fall | baseline's fall | difference | p (Holm) | "
-                  "Holm with the γ = 1 tests | detectable difference |"), "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        record(values_out, "", "", "", "fall tests", len(falls))
-        record(values_out, "", "", "", "γ = 1 tests", len(gamma_one_p))
-        for r in falls:
-            for quantity, value in (("fall (%)", 100 * r["fall"]), ("baseline's fall (%)", 100 * r["baseline_fall"]),
-                                    ("fall difference (pts)", 100 * (r["fall"] - r["baseline_fall"])),
-                                    ("fall p", r["p"]), ("fall p Holm", r["p_holm"]),
-                                    ("fall p Holm with the γ = 1 tests", r["p_holm_with_gamma_one"]),
-                                    ("fall detectable (pts)", 100 * r["detectable"]), ("return at best γ", r["return"]),
-                                    ("baseline's return at its best γ", r["baseline_return"]),
-                                    ("return difference at best γ", r["return"] - r["baseline_return"]),
-                                    ("return at best γ p", r["return_p"]), ("return at best γ p Holm", r["return_p_holm"]),
-                                    ("return at best γ detectable", r["return_detectable"])):  # fmt: skip
-                record(values_out, r["env_id"], r["variant"], r["baseline"], quantity, value)
-            lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {r['best']:g} "
-                         f"({r['baseline_best']:g}) | {pct(r['fall'])} | {pct(r['baseline_fall'])} | "
-                         f"{points(r['fall'] - r['baseline_fall'])} | {fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) | "
-                         f"{fmt_p(r['p_holm_with_gamma_one'])} | {points(r['detectable'], sign=False)} |")  # fmt: skip
-        lines += ["", ("Does a schedule cost return at its best γ? The same seeds' returns at each side's best γ (as "
-                  "above): Welch's t test, Holm over these tests alone, and the difference one test detects with 80% "
-                  "power at α = 0.05, before Holm."), "",
-                  ("| task | variant | baseline | best γ (baseline's) | return | baseline's return | difference | "
-                  "p (Holm) | detectable difference |"), "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        for r in falls:
-            lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {r['best']:g} "
-                         f"({r['baseline_best']:g}) | {fmt(r['return'])} | {fmt(r['baseline_return'])} | "
-                         f"{fmt(r['return'] - r['baseline_return'])} | {fmt_p(r['return_p'])} "
-                         f"({fmt_p(r['return_p_holm'])}) | {fmt(r['return_detectable'])} |")  # fmt: skip
-        lines.append("")
-    goal = distance_tests(distance, variants_of)
-    if goal:
-        lines += [("Does guiding on the goal give a knob that state guidance lacks? The final distance to the goal "
-                  "(mean over seeds) at γ = 1, at the eval γ that brings it closest (chosen on these episodes), and "
-                  "at the largest γ swept; then, paired by seed, how many seeds end farther from the goal at the "
-                  "largest γ than at γ = 1, and a t test of the seeds' changes (Holm over these tests); intervals are "
-                  "in each task's section."), "",
-                  ("| task | variant | γ = 1 | closest γ: distance | largest γ: distance | largest vs γ = 1 | "
-                  "seeds farther | p (Holm) |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
-        for r in goal:
-            change = (r["largest"] - r["at_one"]) / r["at_one"]
-            for quantity, value in (("distance at γ 1", r["at_one"]), ("closest γ", r["closest_gamma"]),
-                                    ("distance at closest γ", r["closest"]), ("largest γ", r["largest_gamma"]),
-                                    ("distance at largest γ", r["largest"]), ("distance largest vs γ 1 (%)", 100 * change),
-                                    ("seeds farther", r["farther"]), ("seeds", r["seeds"]), ("distance p", r["p"]),
-                                    ("distance p Holm", r["p_holm"])):  # fmt: skip
-                record(values_out, r["env_id"], r["variant"], "", quantity, value)
-            lines.append(f"| {r['env_id']} | {paper_name(r['variant'])} | {r['at_one']:.4f} | {r['closest_gamma']:g}: "
-                         f"{r['closest']:.4f} | {r['largest_gamma']:g}: {r['largest']:.4f} | {pct(change)} | "
-                         f"{r['farther']} of {r['seeds']} | {fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) |")  # fmt: skip
-        lines.append("")
-    return lines
 
 
 def report(args: Args) -> list[Path]:
