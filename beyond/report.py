@@ -55,7 +55,6 @@ from beyond.schedules import (
     fall_tests,
     read_heldout,
     read_trajectories,
-    task_section,
     write_trajectories,
 )
 from beyond.sets import (
@@ -66,6 +65,7 @@ from beyond.sets import (
     COMMAND_FOLDER,
     SETS_APART,
 )
+from beyond.task import task_section
 from paper_study.paper import variant_rank
 from paper_study.stats import holm
 from pgg_utils.files import InputError, one_line_errors, write_atomic, write_csv_atomic

@@ -8,14 +8,10 @@ from pathlib import Path
 
 import numpy as np
 
-from beyond.cells import cells_of, largest_vs_best, last_step, record, response_at_last_step, summary
-from beyond.sets import BASELINES, BC_TRAIN_FOLDER, CLONING_VARIANTS, COLLAPSE_FRACTION, SCHEDULE_VARIANTS, SETS_APART
-from beyond.text import pct, seed_list
-from paper_study.agreement import fmt, fmt_p, step_label
-from paper_study.paper import paper_name
+from beyond.cells import cells_of, last_step, response_at_last_step, summary
+from beyond.sets import BASELINES, BC_TRAIN_FOLDER, COLLAPSE_FRACTION, SCHEDULE_VARIANTS, SETS_APART
 from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, welch, welch_of
 from pgg_utils.files import read_csv, write_csv_atomic
-from pgg_utils.pooling import mean_ci95
 
 TRAJECTORY_COLUMNS = ["env_id", "variant", "seed", "step", "guidance", "kl"]
 
@@ -119,116 +115,6 @@ def checkpoint_iteration(run: list[tuple], mark: int) -> tuple | None:
     """The logged (step, γ_train, kl) of the iteration a run saved its checkpoint of `mark` at: the first whose
     step reaches the mark (training saves right after it), None where the run has not reached it."""
     return min((t for t in run if t[0] >= mark), default=None)
-
-
-def task_section(env: str, means: dict, variants: list[str], rows: list[dict], pooled: dict, heldout: dict,
-                 distance: dict, trajectories: dict, values_out: list[dict]) -> list[str]:  # fmt: skip
-    lines = [f"## {env}", ""]
-    steps = sorted({s for (e, v, s, g) in means if e == env})
-    scheduled = [v for v in variants if trajectories.get((env, v))]
-    if scheduled:
-        lines += [("γ_train of each checkpoint's own iteration, the first whose step reaches the mark (mean over seeds, "
-                  "min–max over seeds): where the schedule had taken the guidance."), "",
-                  "| variant | " + " | ".join(step_label(s) for s in steps) + " |", "|---|" + "---|" * len(steps)]  # fmt: skip
-        for variant in scheduled:
-            cells = []
-            for step in steps:
-                values = [t[1] for t in (checkpoint_iteration(runs, step) for runs in
-                                          trajectories[(env, variant)].values()) if t is not None]  # fmt: skip
-                if values:
-                    summary_of = {"mean": float(np.mean(values)), "min": min(values), "max": max(values)}
-                    for name, value in summary_of.items():
-                        record(values_out, env, variant, "", f"γ_train {name} at {step_label(step)}", value)
-                    cells.append(f"{summary_of['mean']:.3f} ({min(values):.3f}–{max(values):.3f})")
-                else:
-                    cells.append("–")
-            lines.append(f"| {paper_name(variant)} | " + " | ".join(cells) + " |")
-        lines.append("")
-    lines += [("Return at γ = 1, mean ± 95% CI over seeds (seed sd); runs whose return at the last step fell below "
-              "half their best mark's, named by seed: at γ = 1, and at their best eval γ of each mark (n/a where "
-              "returns are costs)."), "",
-              "| variant | " + " | ".join(step_label(s) for s in steps) + " | fell at γ = 1 | fell at its best γ |",
-              "|---|" + "---|" * (len(steps) + 2)]  # fmt: skip
-    for variant in variants:
-        cells = cells_of(means, env, variant)
-        out = []
-        for step in steps:
-            if (step, 1.0) in cells:
-                m, h, s = summary(cells[(step, 1.0)])
-                out.append(f"{m:.1f} ± {h:.1f} ({s:.0f})")
-            else:
-                out.append("–")
-        fell = [seed_list(collapsed(cells, every)) for every in (False, True)]
-        lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + f" | {fell[0]} | {fell[1]} |")
-    cloning = sum(r["variant"] in CLONING_VARIANTS for r in rows)
-    lines += ["", (f"Each new variant against each baseline at γ = 1 (Welch's t test, Holm over the report's {len(rows) - cloning} "
-              f"such tests of the schedules and goal nulls, and apart over the {cloning} of the cloning variant; beside it the gap one test detects with 80% power at α = 0.05, before Holm, so a "
-              "non-significant row rules out less than it shows). γ = 1 is not the policy a schedule ending at "
-              "γ_train 1.2 was trained toward: the held-out and γ-response tables below compare at other γ. Then, "
-              "over every (step, eval γ) cell both sweeps hold: how many cells lie above and below the baseline "
-              "(no p value: the cells of one run share its seeds), and the median relative gap (ours − baseline) / "
-              "|baseline| with its exact bootstrap interval over our seeds, which resamples whole runs but holds "
-              "the baseline's means fixed; a percentile bootstrap over 5 seeds under-covers, so the interval is "
-              "narrower than the truth."), "",
-              ("| variant | baseline | step | gap | p (Holm) | detectable gap | cells above / below | "
-              "median gap [95% CI] |"), "|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for r in rows:
-        if r["env_id"] != env:
-            continue
-        key = (env, r["variant"], r["baseline"])
-        last = r["step"] == max(x["step"] for x in rows if (x["env_id"], x["variant"], x["baseline"]) == key)
-        tail = "| |"
-        if last and key in pooled:
-            above, below = pooled[key]["above"], pooled[key]["below"]
-            gap = pooled[key].get("median_gap")
-            for quantity, value in (("cells above", above), ("cells below", below), ("cells", pooled[key]["cells"])):
-                record(values_out, *key, quantity, value)
-            tail = f"| {above} / {below} | " + (
-                f"{pct(gap[0], 2)} [{pct(gap[1], 2)}, {pct(gap[2], 2)}] |" if gap else "– |"
-            )
-        lines.append(f"| {paper_name(r['variant'])} | {paper_name(r['baseline'])} | {step_label(r['step'])} | "
-                     f"{fmt(r['gap'])} | {fmt_p(r['p'])} ({fmt_p(r['p_holm'])}) | {fmt(r['detectable_gap'])} {tail}")  # fmt: skip
-    held = [(v, heldout.get((env, v, steps[-1]))) for v in variants]
-    if any(h for _, h in held):
-        lines += ["", (f"Held-out γ at {step_label(steps[-1])}: chosen on the sweep above, scored on a fresh sweep "
-                  "(episode seeds 20000+) against γ = 1 on the same fresh episodes; Holm over the groups of the sweep each row comes "
-                   "from (the continuous table's for its runs, this task's for those trained here)."), "",
-                  "| variant | chosen γ | fresh return | fresh at γ = 1 | gain ± 95% CI | p (Holm) |",
-                  "|---|---|---|---|---|---|"]  # fmt: skip
-        for variant, h in held:
-            if h and h["status"] == "tested":
-                lines.append(f"| {paper_name(variant)} | {float(h['selected_gamma']):g} | {fmt(float(h['fresh_mean']))} | "
-                             f"{fmt(float(h['fresh_baseline']))} | {fmt(float(h['fresh_gain']))} ± "
-                             f"{fmt(float(h['fresh_gain_ci95']))} | {fmt_p(float(h['p']))} ({fmt_p(float(h['p_holm']))}) |")  # fmt: skip
-            elif h:
-                lines.append(f"| {paper_name(variant)} | {float(h['selected_gamma']):g} | – | – | γ = 1 chosen | – |")
-    gammas = sorted({g for (e, v, s, g) in means if e == env and s == steps[-1]})
-    lines += ["", (f"γ-response at {step_label(steps[-1])}: mean return over seeds at each eval γ, and how far the "
-                   f"largest γ ({gammas[-1]:g}) falls below the best: the deterioration past a modest γ the paper "
-                   "reports."), "",
-              "| variant | " + " | ".join(f"γ = {g:g}" for g in gammas) + f" | γ = {gammas[-1]:g} vs best |",
-              "|---|" + "---|" * (len(gammas) + 1)]  # fmt: skip
-    for variant in variants:
-        _, values = response_at_last_step(means, env, variant)
-        _, drop = largest_vs_best(values)
-        for g, v in zip(gammas, values):
-            record(values_out, env, variant, "", f"return at γ {g:g} at {step_label(steps[-1])}", v)
-        record(values_out, env, variant, "", f"largest γ vs best at {step_label(steps[-1])} (%)", 100 * drop)
-        lines.append(f"| {paper_name(variant)} | " + " | ".join("–" if math.isnan(v) else f"{v:.1f}" for v in values)
-                     + f" | {pct(drop)} |")  # fmt: skip
-    goal_gammas = sorted({g for (e, v, g) in distance if e == env})
-    if goal_gammas:
-        lines += ["", (f"Final distance to the goal at {step_label(steps[-1])} (in the last observation; "
-                  "lower is closer), mean ± 95% CI over seeds of the per-seed mean over episodes."), "",
-                  "| variant | " + " | ".join(f"γ = {g:g}" for g in goal_gammas) + " |",
-                  "|---|" + "---|" * len(goal_gammas)]  # fmt: skip
-        for variant in variants:
-            out = []
-            for g in goal_gammas:
-                values = list(distance.get((env, variant, g), {}).values())
-                out.append(f"{mean_ci95(values)[0]:.4f} ± {mean_ci95(values)[1]:.4f}" if values else "–")
-            lines.append(f"| {paper_name(variant)} | " + " | ".join(out) + " |")
-    return [*lines, ""]
 
 
 def scheduled_tasks(variants_of: dict) -> list[str]:
