@@ -10,10 +10,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
 from beyond.cells import cells_of, last_step
-from beyond.cloning import null_name
 from beyond.command import per_seed, read_tracking
 from beyond.condition_dropout import command_bands, drawn
 from beyond.dropout_sets import Sets
+from beyond.fitted_null import null_name
 from beyond.schedules import scheduled_tasks
 from beyond.sets import BC, COMMAND_FOLDER, COMMAND_SET, COMMAND_VARIANTS, GOAL_ENV, GOAL_SET
 from beyond.text import name

@@ -37,7 +37,7 @@ import tyro
 
 from beyond import condition_dropout, dropout_sets
 from beyond.cells import read_rows, seed_means
-from beyond.cloning import bc_section, cloning_fresh_tests, cloning_section, read_bc
+from beyond.cloning import cloning_fresh_tests, cloning_section
 from beyond.command_text import command_section
 from beyond.figures import (
     bc_figure,
@@ -47,6 +47,7 @@ from beyond.figures import (
     gamma_response_figure,
     trajectory_figure,
 )
+from beyond.fitted_null import bc_section, read_bc
 from beyond.glance import glance_section
 from beyond.goals import read_goal_distance
 from beyond.question_3 import question_3_reading

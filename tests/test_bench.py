@@ -406,7 +406,7 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
     difference is where the paired test's power reaches 80%; n/a where no seed differs."""
     from scipy import stats
 
-    from beyond import cloning
+    from beyond import fitted_null
     from beyond import report as beyond_report
     from beyond import sets as beyond_sets
     from paper_study import stats as study_stats
@@ -427,10 +427,10 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
     none = str(tmp_path / "none.csv")
     args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"), table_heldout=none,
                               discrete_table=none, discrete_heldout=none)  # fmt: skip
-    means, fresh, sets, heldout = cloning.read_bc(tmp_path / "beyond", args)
+    means, fresh, sets, heldout = fitted_null.read_bc(tmp_path / "beyond", args)
     assert sets == [("Hopper-v4", "ppo")] and not heldout
     values = []
-    lines = cloning.bc_section(means, fresh, sets, heldout, values)
+    lines = fitted_null.bc_section(means, fresh, sets, heldout, values)
     number = {(r["variant"], r["baseline"], r["quantity"]): r["value"] for r in values}
     bc = "ppo" + beyond_sets.BC
     best_own, best_bc = number[("ppo", "question 3", "best γ")], number[(bc, "question 3", "best γ")]
