@@ -22,47 +22,20 @@ seed, and the dropout set's change against the others' (Welch)."""
 
 import numpy as np
 
-from beyond.cells import record
-from beyond.command import gain, per_seed
+from beyond.dropout_command import command_tables, command_values
 from beyond.dropout_goal import goal_part, null_part
 from beyond.dropout_sets import Sets
 from beyond.dropout_tests import (
-    SECTION,
-    against_gamma_one,
-    against_others,
     falls_and_rises,
-    family,
-    gaps_of,
     named,
-    record_family,
-    record_welch,
-    seeds_of,
     test_cells,
 )
-from beyond.sets import COMMAND_DROPOUT, COMMAND_ENV, COMMAND_SEEDS, COMMAND_SET, DROPOUT_FOLDER, GOAL_DROPOUT
-from beyond.text import marks, name, seeds_cell
+from beyond.sets import COMMAND_DROPOUT, COMMAND_SEEDS, COMMAND_SET, DROPOUT_FOLDER, GOAL_DROPOUT
+from beyond.text import fill, marks, name, seeds_cell
 from paper_study.agreement import fmt_p
 from paper_study.stats import ALPHA
 
 FIGURE = "condition_dropout.png"
-
-
-# The command bands: the thirds of the training range, then the commands below and above it.
-BANDS = ("low", "middle", "high", "below", "above")
-
-
-def command_bands(commands: list[float], inside: dict) -> list[tuple[str, list[float]]]:
-    """(band, its commands) of the bands that hold a command: the thirds of the training range (its lowest and
-    highest command inside), then the commands below and above it."""
-    in_range = [c for c in commands if inside[c]]
-    low, high = min(in_range), max(in_range)
-    third = (high - low) / 3
-    chosen = {"low": [c for c in in_range if c < low + third],
-              "middle": [c for c in in_range if low + third <= c <= high - third],
-              "high": [c for c in in_range if c > high - third],
-              "below": [c for c in commands if not inside[c] and c < low],
-              "above": [c for c in commands if not inside[c] and c > high]}  # fmt: skip
-    return [(name, chosen[name]) for name in BANDS if chosen[name]]
 
 
 def section(sets: Sets, values_out: list[dict]) -> list[str]:
@@ -91,6 +64,34 @@ def section(sets: Sets, values_out: list[dict]) -> list[str]:
     return [*lines, ""]
 
 
+PARTIAL = ("**Partial set:** {gaps}. The tables below hold what there is; they are not the set's result, and a verdict "
+           "waits for the whole set.")  # fmt: skip
+AT_MARK = ("{marks}: eval γ {gammas:gs} (a variant's row is absent where it was not tracked at that γ); the bands: {bands} "
+           "m/s (the training range is [{low:g}, {high:g}]). Each seed's value is the mean over its episodes and the "
+           "commands named, then mean ± 95% CI over seeds.")  # fmt: skip
+ERRORS = ("**Does γ > 1 make the agents follow the command more closely, with and without dropout?** Over the training "
+          "range at each eval γ: the tracking error |mean velocity − command| of each episode (the report's), and beside "
+          "it the reward's per-step error, the mean over the episode of |v_t − command| (tracking.csv's "
+          "`tracking_error`), each against γ = 1 (Holm over each measure's {tests} tests apart). A negative change "
+          "follows more closely.")  # fmt: skip
+ERRORS_HEAD = ("| variant (null) | seeds | γ | tracking error (m/s) | vs γ = 1 | p (Holm) | detectable | per-step error "
+               "(m/s) | vs γ = 1 | p (Holm) | detectable |\n|---|---|---|---|---|---|---|---|---|---|---|")  # fmt: skip
+GAINS = ("The gain (slope of achieved on commanded velocity over the training range: 1 follows every change of command, 0 "
+         "ignores it) and the return over the range, each against γ = 1 (Holm over each measure's tests apart).")  # fmt: skip
+GAINS_HEAD = ("| variant (null) | γ | gain | vs γ = 1 | p (Holm) | detectable | return | vs γ = 1 | p (Holm) | "
+              "detectable |\n|---|---|---|---|---|---|---|---|---|---|")  # fmt: skip
+BANDS_TEXT = ("**Per band of commands**, since changes of opposite sign cancel in the error over the range: the tracking "
+              "error over each band at each eval γ, and against γ = 1 its change, Holm p and the change one test detects "
+              "(Holm over the {inside} tests inside the range, and apart over the {outside} outside it): error (change, "
+              "p Holm; detectable).")  # fmt: skip
+KNOB = ("**Does dropping the command give a knob the others lack?** The dropout set's per-seed change from γ = 1 against "
+        "each other variant's, over the training range, in tracking error and in gain: Welch's t test (distinct runs), "
+        "Holm over the {errors} error tests and apart over the {gains} gain tests. A negative error difference, or a "
+        "positive gain difference, follows the command more closely with dropout.")  # fmt: skip
+KNOB_HEAD = ("| measure | γ | against | dropout's change | its change | difference | p (Holm) | detectable |\n"
+             "|---|---|---|---|---|---|---|---|")  # fmt: skip
+
+
 def command_part(sets: Sets, values_out: list[dict]) -> list[str]:
     """The command task: does γ make the agents trained with the command dropped follow it more closely?"""
     if "command" in sets.absent:
@@ -101,103 +102,55 @@ def command_part(sets: Sets, values_out: list[dict]) -> list[str]:
             "",
             f"**Not comparable:** {sets.absent['command baselines']} does not exist: no baseline to compare with.",
         ]
-    cells = sets.command
-    if not any(k[0] == COMMAND_DROPOUT for k in cells):
+    if not any(k[0] == COMMAND_DROPOUT for k in sets.command):
         return ["", f"**Not run yet:** the dropout set's tracking.csv holds no episode of {COMMAND_DROPOUT}."]
-    env, variants = COMMAND_ENV, [v for v in COMMAND_SET if any(k[0] == v for k in cells)]
-    gammas, commands = sorted({g for (v, s, g, c) in cells}), sorted({c for (v, s, g, c) in cells})
-    bands = command_bands(commands, sets.inside)
-    in_range = [c for c in commands if sets.inside[c]]
-    gaps = gaps_of(cells, COMMAND_DROPOUT)
-    record(values_out, env, COMMAND_DROPOUT, SECTION, "whole", float(not gaps))
+    t = command_tables(sets.command, sets.inside)
+    values_out += command_values(t)
+    variants, gammas, bands = t["variants"], t["gammas"], t["bands"]
     lines = ["", "### The command task", ""]
-    if gaps:
-        lines += [(f"**Partial set:** {'; '.join(gaps)}. The tables below hold what there is; they are not the set's "
-                   "result, and a verdict waits for the whole set."), ""]  # fmt: skip
-    lines += [(f"{marks(sets.command_steps, variants)}: eval γ {', '.join(f'{g:g}' for g in gammas)} (a variant's row is absent "
-               f"where it was not tracked at that γ); the bands: "
-               + "; ".join(f"{band_name} {', '.join(f'{c:g}' for c in chosen)}" for band_name, chosen in bands)
-               + " m/s (the training range is "
-               f"[{min(in_range):g}, {max(in_range):g}]). Each seed's value is the mean over its episodes and the commands "
-               "named, then mean ± 95% CI over seeds.")]  # fmt: skip
-    over_range = lambda quantity: lambda v, g: per_seed(cells, v, g, in_range, quantity)
-    error = family(against_gamma_one(variants, gammas, over_range("error")))
-    step_error = family(against_gamma_one(variants, gammas, over_range("step_error")))
-    gains = family(against_gamma_one(variants, gammas, lambda v, g: gain(cells, v, g, in_range)))
-    returns = family(against_gamma_one(variants, gammas, over_range("return")))
-    for rows, quantity in ((error, "tracking error"), (step_error, "per-step error"), (gains, "gain"),
-                           (returns, "return")):  # fmt: skip
-        record_family(values_out, env, rows, quantity)
-    for variant in variants:
-        record(values_out, env, variant, SECTION, "seeds", seeds_of(error, variant))
-    lines += ["", ("**Does γ > 1 make the agents follow the command more closely, with and without dropout?** Over the "
-                   "training range at each eval γ: the tracking error |mean velocity − command| of each episode (the "
-                   "report's), and beside it the reward's per-step error, the mean over the episode of |v_t − command| "
-                   "(tracking.csv's `tracking_error`), each against γ = 1 (Holm over each measure's "
-                   f"{sum(r['test'] is not None for r in error)} tests apart). A negative change follows more closely."), "",
-              ("| variant (null) | seeds | γ | tracking error (m/s) | vs γ = 1 | p (Holm) | detectable | per-step error "
-               "(m/s) | vs γ = 1 | p (Holm) | detectable |"), "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for ours, theirs in zip(error, step_error, strict=True):
+    if t["gaps"]:
+        lines += [fill(PARTIAL, gaps="; ".join(t["gaps"])), ""]
+    lines.append(fill(AT_MARK, marks=marks(sets.command_steps, variants), gammas=gammas, low=min(t["in_range"]),
+                      high=max(t["in_range"]), bands="; ".join(f"{band} {', '.join(f'{c:g}' for c in chosen)}" for band, chosen in bands)))  # fmt: skip
+    lines += ["", fill(ERRORS, tests=sum(r["test"] is not None for r in t["error"])), "", ERRORS_HEAD]
+    for ours, theirs in zip(t["error"], t["step_error"], strict=True):
         lines.append(f"| {name(ours['variant'], COMMAND_SET)} | {len(ours['values'])} | {ours['gamma']:g} | "
                      f"{seeds_cell(ours['values'], 3)} | " + " | ".join(test_cells(ours["test"], 3))
                      + f" | {seeds_cell(theirs['values'], 3)} | " + " | ".join(test_cells(theirs["test"], 3)) + " |")  # fmt: skip
-    lines += ["", ("The gain (slope of achieved on commanded velocity over the training range: 1 follows every change "
-                   "of command, 0 ignores it) and the return over the range, each against γ = 1 (Holm over each "
-                   "measure's tests apart)."), "",
-              ("| variant (null) | γ | gain | vs γ = 1 | p (Holm) | detectable | return | vs γ = 1 | p (Holm) | "
-               "detectable |"), "|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for ours, theirs in zip(gains, returns, strict=True):
-        return_cells = test_cells(theirs["test"], 1)
+    lines += ["", GAINS, "", GAINS_HEAD]
+    for ours, theirs in zip(t["gains"], t["returns"], strict=True):
         lines.append(f"| {name(ours['variant'], COMMAND_SET)} | {ours['gamma']:g} | {seeds_cell(ours['values'])} | "
                      + " | ".join(test_cells(ours["test"], 2)) + f" | {seeds_cell(theirs['values'], 1)} | "
-                     + " | ".join(return_cells) + " |")  # fmt: skip
-    by_band = {}
-    for names in (("low", "middle", "high"), ("below", "above")):  # inside the range, outside it: two families
-        rows = family([r for band_name, chosen in bands if band_name in names for r in against_gamma_one(
-            variants, gammas, lambda v, g, chosen=chosen: per_seed(cells, v, g, chosen, "error"), band=band_name)])  # fmt: skip
-        record_family(values_out, env, rows, "tracking error")
-        by_band.update({(r["variant"], r["band"], r["gamma"]): r for r in rows})
-    family_size = lambda names: sum(r["test"] is not None for r in by_band.values() if r["band"] in names)
-    lines += ["", ("**Per band of commands**, since changes of opposite sign cancel in the error over the range: the "
-                   "tracking error over each band at each eval γ, and against γ = 1 its change, Holm p and the change "
-                   f"one test detects (Holm over the {family_size(('low', 'middle', 'high'))} tests inside the range, "
-                   f"and apart over the {family_size(('below', 'above'))} outside it): error (change, p Holm; "
-                   "detectable)."), "",
-              "| variant (null) | band | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |",
-              "|---|---|" + "---|" * len(gammas)]  # fmt: skip
+                     + " | ".join(test_cells(theirs["test"], 1)) + " |")  # fmt: skip
+    inside, outside = (sum(r["test"] is not None for r in rows) for rows in t["band_families"])
+    lines += ["", fill(BANDS_TEXT, inside=inside, outside=outside), "",
+              "| variant (null) | band | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |", "|---|---|" + "---|" * len(gammas)]  # fmt: skip
     for variant in variants:
-        for band_name, chosen in bands:
-            shown = []
-            for gamma in gammas:
-                r = by_band.get((variant, band_name, gamma))
-                if r is None:
-                    shown.append("–")
-                    continue
-                mean = float(np.mean(list(r["values"].values())))
-                test = r["test"]
-                shown.append(f"{mean:.3f}" if test is None else
-                             f"{mean:.3f} ({test['difference']:+.3f}, {fmt_p(test['p_holm'])}; {test['detectable']:.3f})")  # fmt: skip
-            lines.append(f"| {name(variant, COMMAND_SET)} | {band_name} ({', '.join(f'{c:g}' for c in chosen)}) | "
-                         + " | ".join(shown) + " |")  # fmt: skip
-    knob = against_others(variants, gammas, lambda v, g: per_seed(cells, v, g, in_range, "error"), COMMAND_DROPOUT)
-    knob_gain = against_others(variants, gammas, lambda v, g: gain(cells, v, g, in_range), COMMAND_DROPOUT)
-    record_welch(values_out, env, knob, COMMAND_DROPOUT, "tracking error")
-    record_welch(values_out, env, knob_gain, COMMAND_DROPOUT, "gain")
-    lines += ["", ("**Does dropping the command give a knob the others lack?** The dropout set's per-seed change from "
-                   "γ = 1 against each other variant's, over the training range, in tracking error and in gain: Welch's "
-                   f"t test (distinct runs), Holm over the {len(knob)} error tests and apart over the {len(knob_gain)} "
-                   "gain tests. A negative error difference, or a positive gain difference, follows the command more "
-                   "closely with dropout."), "",
-              "| measure | γ | against | dropout's change | its change | difference | p (Holm) | detectable |",
-              "|---|---|---|---|---|---|---|---|"]  # fmt: skip
-    for measure, rows in (("tracking error", knob), ("gain", knob_gain)):
-        for r in rows:
-            lines.append(f"| {measure} | {r['gamma']:g} | {name(r['baseline'], COMMAND_SET)} | {r['mean']:+.3f} | "
-                         f"{r['baseline_mean']:+.3f} | {r['mean'] - r['baseline_mean']:+.3f} | {fmt_p(r['p'])} "
-                         f"({fmt_p(r['p_holm'])}) | {r['detectable']:.3f} |")  # fmt: skip
-    if not gaps:
-        lines += command_verdict(error, step_error, gains, by_band, knob, knob_gain)
+        for band, chosen in bands:
+            shown = [band_cell(t["by_band"].get((variant, band, gamma))) for gamma in gammas]
+            lines.append(
+                f"| {name(variant, COMMAND_SET)} | {band} ({', '.join(f'{c:g}' for c in chosen)}) | "
+                + " | ".join(shown)
+                + " |"
+            )
+    lines += ["", fill(KNOB, errors=len(t["knob"]), gains=len(t["knob_gain"])), "", KNOB_HEAD]
+    for measure, rows in (("tracking error", t["knob"]), ("gain", t["knob_gain"])):
+        lines += [f"| {measure} | {r['gamma']:g} | {name(r['baseline'], COMMAND_SET)} | {r['mean']:+.3f} | "
+                  f"{r['baseline_mean']:+.3f} | {r['mean'] - r['baseline_mean']:+.3f} | {fmt_p(r['p'])} "
+                  f"({fmt_p(r['p_holm'])}) | {r['detectable']:.3f} |" for r in rows]  # fmt: skip
+    if not t["gaps"]:
+        lines += command_verdict(t["error"], t["step_error"], t["gains"], t["by_band"], t["knob"], t["knob_gain"])
     return lines
+
+
+def band_cell(r: dict | None) -> str:
+    """A band's cell: the error, and against γ = 1 its change, Holm p and detectable change; – where untracked."""
+    if r is None:
+        return "–"
+    mean, test = float(np.mean(list(r["values"].values()))), r["test"]
+    if test is None:
+        return f"{mean:.3f}"
+    return f"{mean:.3f} ({test['difference']:+.3f}, {fmt_p(test['p_holm'])}; {test['detectable']:.3f})"
 
 
 def command_verdict(error, step_error, gains, by_band, knob, knob_gain) -> list[str]:

@@ -11,7 +11,8 @@ import matplotlib.pyplot as plt
 
 from beyond.cells import cells_of, last_step
 from beyond.command import per_seed, read_tracking
-from beyond.condition_dropout import command_bands, drawn
+from beyond.condition_dropout import drawn
+from beyond.dropout_command import command_bands
 from beyond.dropout_sets import Sets
 from beyond.fitted_null import null_name
 from beyond.schedules import scheduled_tasks
