@@ -9,8 +9,16 @@ from pathlib import Path
 import numpy as np
 
 from beyond.cells import cells_of, last_step, response_at_last_step, summary
-from beyond.sets import BASELINES, BC_TRAIN_FOLDER, COLLAPSE_FRACTION, SCHEDULE_VARIANTS, SETS_APART
-from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, welch, welch_of
+from beyond.sets import (
+    BASELINES,
+    BC_TRAIN_FOLDER,
+    BEYOND_VARIANT_IDS,
+    CLONING_VARIANTS,
+    COLLAPSE_FRACTION,
+    SCHEDULE_VARIANTS,
+    SETS_APART,
+)
+from paper_study.stats import ALPHA, detectable_gap, holm, median_relative_gap, set_holm, welch, welch_of
 from pgg_utils.files import read_csv, write_csv_atomic
 
 TRAJECTORY_COLUMNS = ["env_id", "variant", "seed", "step", "guidance", "kl"]
@@ -159,3 +167,18 @@ def fall_tests(means: dict, variants_of: dict, gamma_one_p: list[float] = (), va
                                                  holm([r["return_p"] for r in rows])):  # fmt: skip
         row["p_holm"], row["p_holm_with_gamma_one"], row["return_p_holm"] = p_holm, p_joint, return_holm
     return rows
+
+
+def gamma_one_tests(means: dict, variants_of: dict) -> tuple[list[dict], dict]:
+    """report.csv's rows: each new variant against each baseline of its task at γ = 1 per step (Holm over the
+    schedules' and goal nulls' tests, and apart over the cloning variant's, Question 3's family), and the pooled
+    cells of each pair {(env, variant, baseline): comparisons' pooled}."""
+    rows, pooled = [], {}
+    for env, variants in variants_of.items():
+        for variant in (v for v in variants if v in BEYOND_VARIANT_IDS):
+            for baseline in (b for b in BASELINES if b in variants):
+                found, pooled[(env, variant, baseline)] = comparisons(means, env, variant, baseline)
+                rows.extend(found)
+    for cloning in (False, True):
+        set_holm([r for r in rows if (r["variant"] in CLONING_VARIANTS) == cloning])
+    return rows, pooled
