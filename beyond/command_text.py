@@ -8,7 +8,7 @@ import numpy as np
 
 from beyond.command import CommandTables, command_tables, command_values, far_in_table_order, read_tracking, sweep_table
 from beyond.sets import COMMAND_ENV, COMMAND_FOLDER, COMMAND_SEEDS
-from beyond.text import command_name, fill, seeds_cell
+from beyond.text import change_cell, command_name, fill, seeds_cell
 from paper_study.agreement import fmt_p, step_label
 from paper_study.stats import ALPHA
 
@@ -134,7 +134,9 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
         rows = far_in_table_order(t)
         for variant in t.variants:
             for side, chosen in t.outside:
-                shown = [far_cell(r) for r in rows if r["variant"] == variant and r["side"] == side]
+                shown = [
+                    change_cell(r["error"], r["test"], 3) for r in rows if r["variant"] == variant and r["side"] == side
+                ]
                 lines.append(f"| {command_name(variant)} | {side} ({', '.join(f'{c:g}' for c in chosen)}) | "
                              + " | ".join(shown) + " |")  # fmt: skip
     lines += command_verdict(t)
@@ -150,16 +152,6 @@ def command_section(folder: Path, values_out: list[dict]) -> list[str]:
 
 def p_cell(test: dict) -> str:
     return f"{fmt_p(test['p'])} ({fmt_p(test['p_holm'])})"
-
-
-def far_cell(r: dict) -> str:
-    """A cell outside the training range: the error, and against γ = 1 its change, Holm p and detectable change."""
-    if not r["error"]:
-        return "–"
-    mean, test = float(np.mean(list(r["error"].values()))), r["test"]
-    if test is None:
-        return f"{mean:.3f}"
-    return f"{mean:.3f} ({test['difference']:+.3f}, {fmt_p(test['p_holm'])}; {test['detectable']:.3f})"
 
 
 def top_of_range_lines(t: CommandTables) -> list[str]:

@@ -1,7 +1,9 @@
-"""The section "Guidance on a condition, with the condition dropped in training" of "Beyond the paper", and its
-figure: classifier-free guidance's recipe on a condition (the command or the goal dropped with probability 0.1 in
-updates, both branches trained at γ_train 1, guidance only at test; results/beyond/condition_dropout/run_all.sh)
-against the committed sets beside it. beyond/report.py calls `read`, `section` and `figure`; it reads:
+"""The section "Guidance on a condition, with the condition dropped in training" of "Beyond the paper":
+classifier-free guidance's recipe on a condition (the command or the goal dropped with probability 0.1 in updates,
+both branches trained at γ_train 1, guidance only at test; results/beyond/condition_dropout/run_all.sh) against the
+committed sets beside it. beyond/report.py reads the sets with dropout_sets.read, writes this module's `section` (its
+command part here; the Reacher part and the learned nulls in dropout_goal.py; the numbers in dropout_command.py and
+dropout_tests.py) and draws figures.dropout_figure. The files read:
   condition_dropout/command/tracking.csv   the command set with the command dropped (beyond/command_tracking.py)
   command/tracking.csv                     the command null without dropout, the state null and PPO
   condition_dropout/goal_distance.csv      Reacher-v4 with the goal dropped (beyond/goal_distance.py)
@@ -26,12 +28,13 @@ from beyond.dropout_command import command_tables, command_values
 from beyond.dropout_goal import goal_part, null_part
 from beyond.dropout_sets import Sets
 from beyond.dropout_tests import (
+    cell,
     falls_and_rises,
     named,
     test_cells,
 )
 from beyond.sets import COMMAND_DROPOUT, COMMAND_SEEDS, COMMAND_SET, DROPOUT_FOLDER, GOAL_DROPOUT
-from beyond.text import fill, marks, name, seeds_cell
+from beyond.text import change_cell, fill, marks, name, seeds_cell
 from paper_study.agreement import fmt_p
 from paper_study.stats import ALPHA
 
@@ -127,7 +130,7 @@ def command_part(sets: Sets, values_out: list[dict]) -> list[str]:
               "| variant (null) | band | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |", "|---|---|" + "---|" * len(gammas)]  # fmt: skip
     for variant in variants:
         for band, chosen in bands:
-            shown = [band_cell(t["by_band"].get((variant, band, gamma))) for gamma in gammas]
+            shown = [change_cell(*cell(t["by_band"].get((variant, band, gamma))), 3) for gamma in gammas]
             lines.append(
                 f"| {name(variant, COMMAND_SET)} | {band} ({', '.join(f'{c:g}' for c in chosen)}) | "
                 + " | ".join(shown)
@@ -141,16 +144,6 @@ def command_part(sets: Sets, values_out: list[dict]) -> list[str]:
     if not t["gaps"]:
         lines += command_verdict(t["error"], t["step_error"], t["gains"], t["by_band"], t["knob"], t["knob_gain"])
     return lines
-
-
-def band_cell(r: dict | None) -> str:
-    """A band's cell: the error, and against γ = 1 its change, Holm p and detectable change; – where untracked."""
-    if r is None:
-        return "–"
-    mean, test = float(np.mean(list(r["values"].values()))), r["test"]
-    if test is None:
-        return f"{mean:.3f}"
-    return f"{mean:.3f} ({test['difference']:+.3f}, {fmt_p(test['p_holm'])}; {test['detectable']:.3f})"
 
 
 def command_verdict(error, step_error, gains, by_band, knob, knob_gain) -> list[str]:

@@ -10,6 +10,7 @@ from beyond.dropout_tests import (
     SECTION,
     against_gamma_one,
     against_others,
+    cell,
     falls_and_rises,
     family,
     goal_gaps,
@@ -29,7 +30,7 @@ from beyond.sets import (
     GOAL_ENV,
     GOAL_SET,
 )
-from beyond.text import fill, marks, name
+from beyond.text import change_cell, fill, marks, name
 from paper_study.agreement import fmt_p
 from paper_study.paper import paper_name
 from paper_study.stats import ALPHA
@@ -110,7 +111,7 @@ def goal_part(sets: Sets, values_out: list[dict]) -> list[str]:
     lines += [fill(DISTANCE, marks=marks(sets.goal_steps, variants), tests=sum(r["test"] is not None for r in distance)), "",
               "| variant (null) | seeds | " + " | ".join(f"γ = {g:g}" for g in gammas) + " |", "|---|---|" + "---|" * len(gammas)]  # fmt: skip
     for variant in variants:
-        shown = [distance_cell(t["at"].get((variant, gamma))) for gamma in gammas]
+        shown = [change_cell(*cell(t["at"].get((variant, gamma))), 4) for gamma in gammas]
         lines.append(f"| {name(variant, GOAL_SET)} | {seeds_of(distance, variant)} | " + " | ".join(shown) + " |")
     lines += ["", fill(KNOB, tests=len(knob)), "", KNOB_HEAD]
     lines += [f"| {r['gamma']:g} | {name(r['baseline'], GOAL_SET)} | {r['mean']:+.4f} | {r['baseline_mean']:+.4f} | "
@@ -128,15 +129,6 @@ def goal_part(sets: Sets, values_out: list[dict]) -> list[str]:
             fill(AGAINST_ITEM, **{**r, "name": name(r["baseline"], GOAL_SET)}) for r in differing)))  # fmt: skip
         lines += ["", "".join(parts)]
     return lines
-
-
-def distance_cell(r: dict | None) -> str:
-    if r is None:
-        return "–"
-    mean, test = float(np.mean(list(r["values"].values()))), r["test"]
-    if test is None:
-        return f"{mean:.4f}"
-    return f"{mean:.4f} ({test['difference']:+.4f}, {fmt_p(test['p_holm'])}; {test['detectable']:.4f})"
 
 
 def null_rows(sets: Sets) -> tuple[list[dict], list[str]]:

@@ -126,3 +126,8 @@ def named(rows: list[dict], unit: str = " m/s", digits: int = 3) -> str:
     tests = [f"γ {r['gamma']:g}{' ' + r['band'] if 'band' in r else ''} {r['test']['difference']:+.{digits}f}{unit}, "
              f"Holm p {fmt_p(r['test']['p_holm'])}" for r in rows]  # fmt: skip
     return f" ({'; '.join(tests)})" if tests else ""
+
+
+def cell(row: dict | None) -> tuple[dict | None, dict | None]:
+    """(values, test) of a family's row, for text.change_cell; (None, None) where the variant has no row at that γ."""
+    return (None, None) if row is None else (row["values"], row["test"])

@@ -5,6 +5,8 @@ the numbers of the tables it quotes."""
 import math
 import string
 
+import numpy as np
+
 from beyond.sets import COMMAND_VARIANTS
 from paper_study.agreement import fmt_p, step_label
 from paper_study.paper import paper_name
@@ -51,6 +53,17 @@ def marks(steps: dict, variants: list[str]) -> str:
     return (
         "At each variant's last mark (" + "; ".join(f"{paper_name(v)}: {step_label(steps[v])}" for v in variants) + ")"
     )
+
+
+def change_cell(values: dict | None, test: dict | None, digits: int) -> str:
+    """A cell of a measure at one γ: its mean over seeds, and against γ = 1 its change, Holm p and the change one test
+    detects (where tested); – where there is no value."""
+    if not values:
+        return "–"
+    mean = float(np.mean(list(values.values())))
+    if test is None:
+        return f"{mean:.{digits}f}"
+    return f"{mean:.{digits}f} ({test['difference']:+.{digits}f}, {fmt_p(test['p_holm'])}; {test['detectable']:.{digits}f})"
 
 
 class _Sentence(string.Formatter):
