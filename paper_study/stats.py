@@ -222,3 +222,36 @@ def performance_profile(per_task: list[np.ndarray], taus: np.ndarray, resamples:
     profiles = (drawn[:, :, None] > taus).mean(axis=1)  # (resamples, taus)
     low, high = np.percentile(profiles, [2.5, 97.5], axis=0)
     return profile, low, high
+
+
+def paired_test(ours: dict, theirs: dict) -> dict | None:
+    """A paired t test of two {seed: value} (the same agents, the same episodes) on their shared seeds: the
+    mean difference, p, and the difference one test detects with 80% power at α = 0.05 (the noncentral t);
+    None with fewer than 3 shared seeds or no spread in the differences, where no test means anything."""
+    seeds = sorted(ours.keys() & theirs.keys())
+    differences = np.array([ours[seed] - theirs[seed] for seed in seeds])
+    if len(seeds) < 3 or not np.std(differences) > 0:
+        return None
+    n, sd = len(seeds), float(np.std(differences, ddof=1))
+    critical = stats.t.ppf(1 - ALPHA / 2, n - 1)
+    # The lower tail is below 1e-10 where the power nears 0.8, and scipy's noncentral t returns NaN far out in it.
+    power = lambda gap: stats.nct.sf(critical, n - 1, gap * math.sqrt(n) / sd)
+    high = sd
+    while power(high) < 0.8:
+        high *= 2
+    return {"difference": float(differences.mean()), "n": n, "p": float(stats.ttest_1samp(differences, 0.0).pvalue),
+            "detectable": float(optimize.brentq(lambda gap: power(gap) - 0.8, 0.0, high))}  # fmt: skip
+
+
+def welch_of(ours: list[float], theirs: list[float]) -> dict:
+    """Welch's test of two samples: their means, p and the difference one test detects with 80% power."""
+    (m1, s1, n1), (m2, s2, n2) = ((float(np.mean(x)), float(np.std(x, ddof=1)), len(x)) for x in (ours, theirs))
+    return {"mean": m1, "baseline_mean": m2, "p": welch(m1, s1, n1, m2, s2, n2)[2],
+            "detectable": detectable_gap(s1, n1, s2, n2, ALPHA)}  # fmt: skip
+
+
+def set_holm(tests: list[dict | None]) -> None:
+    """Holm over one family: the tests that were made (None where a side had too few seeds)."""
+    made = [t for t in tests if t is not None]
+    for test, p_holm in zip(made, holm([t["p"] for t in made])):
+        test["p_holm"] = p_holm

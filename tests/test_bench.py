@@ -291,7 +291,8 @@ def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the
     own (largest γ − best γ of the mean) / best, Welch's unequal-variance p as scipy gives it, Holm over the two."""
     from scipy import stats
 
-    from beyond import report as beyond_report
+    from beyond import schedules
+    from paper_study import stats as study_stats
 
     returns = {  # per eval γ at 1M, seeds 1–4
         "pgg_g1to1.2": {1.0: [1000, 1100, 900, 1000], 1.2: [2000, 2200, 1900, 2100], 1.5: [1500, 1300, 1700, 1400]},
@@ -300,7 +301,7 @@ def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the
     }
     means = {("Hopper-v4", v, 1_000_000, g): dict(enumerate(values, start=1))
              for v, by_gamma in returns.items() for g, values in by_gamma.items()}  # fmt: skip
-    rows = beyond_report.fall_tests(means, {"Hopper-v4": ["ppo", "pgg_g1.1", "pgg_g1to1.2"]})
+    rows = schedules.fall_tests(means, {"Hopper-v4": ["ppo", "pgg_g1.1", "pgg_g1to1.2"]})
     falls = {v: [(worst - best) / best for best, worst in zip(r[1.2 if v != "ppo" else 1.0], r[1.5])]
              for v, r in returns.items()}  # fmt: skip
     p = [stats.ttest_ind(falls["pgg_g1to1.2"], falls[b], equal_var=False).pvalue for b in ("ppo", "pgg_g1.1")]
@@ -311,16 +312,16 @@ def test_beyond_report_tests_each_schedules_fall_from_its_best_gamma_against_the
     assert [r["p_holm"] for r in rows] == pytest.approx([min(1, 2 * min(p)) if x == min(p) else max(min(1, 2 * min(p)), x)
                                                          for x in p])  # fmt: skip
     # Holm over the falls and other tests (the report's γ = 1 ones): a family of 2 + 3
-    joint = beyond_report.fall_tests(means, {"Hopper-v4": ["ppo", "pgg_g1.1", "pgg_g1to1.2"]}, [0.5, 0.9, 1e-6])
-    assert [r["p_holm_with_gamma_one"] for r in joint] == pytest.approx(beyond_report.holm([*p, 0.5, 0.9, 1e-6])[:2])
+    joint = schedules.fall_tests(means, {"Hopper-v4": ["ppo", "pgg_g1.1", "pgg_g1to1.2"]}, [0.5, 0.9, 1e-6])
+    assert [r["p_holm_with_gamma_one"] for r in joint] == pytest.approx(study_stats.holm([*p, 0.5, 0.9, 1e-6])[:2])
     assert [r["p_holm"] for r in joint] == [r["p_holm"] for r in rows]  # the falls' own family is unchanged
     # the return at each side's own best γ: 1.2 for the schedule, 1 for PPO, 1.2 for the constant
     at_best = [stats.ttest_ind(returns["pgg_g1to1.2"][1.2], returns[b][g], equal_var=False).pvalue
                for b, g in (("ppo", 1.0), ("pgg_g1.1", 1.2))]  # fmt: skip
     assert [r["return"] - r["baseline_return"] for r in rows] == pytest.approx([37.5, -62.5])
     assert [r["return_p"] for r in rows] == pytest.approx(at_best)
-    assert [r["return_p_holm"] for r in rows] == pytest.approx(beyond_report.holm(at_best))
-    assert beyond_report.collapsed({(1_000_000, 1.0): {1: -40.0}, (200_000, 1.0): {1: -60.0}}) is None  # costs
+    assert [r["return_p_holm"] for r in rows] == pytest.approx(study_stats.holm(at_best))
+    assert schedules.collapsed({(1_000_000, 1.0): {1: -40.0}, (200_000, 1.0): {1: -60.0}}) is None  # costs
 
 
 def test_beyond_report_pairs_goal_distances_by_seed_and_draws_only_the_variants_its_tables_hold(monkeypatch, tmp_path):
@@ -328,17 +329,17 @@ def test_beyond_report_pairs_goal_distances_by_seed_and_draws_only_the_variants_
     out), a one-sample t test of the changes; a variant of goal_distance.csv that no table holds is not drawn."""
     from scipy import stats
 
-    from beyond import report as beyond_report
+    from beyond import figures, goals
 
     distance = {("Reacher-v4", "ppo", 1.0): {1: 0.1, 2: 0.2, 3: 0.3, 4: 0.2},
                 ("Reacher-v4", "ppo", 1.5): {1: 0.15, 2: 0.18, 3: 0.4},
                 ("Reacher-v4", "pgg_drop0.1", 1.0): {1: 0.1}, ("Reacher-v4", "pgg_drop0.1", 1.5): {1: 0.3}}  # fmt: skip
-    (row,) = beyond_report.distance_tests(distance, {"Reacher-v4": ["ppo"]})
+    (row,) = goals.distance_tests(distance, {"Reacher-v4": ["ppo"]})
     assert (row["farther"], row["seeds"]) == (2, 3)
     assert row["p"] == pytest.approx(stats.ttest_1samp([0.05, -0.02, 0.1], 0.0).pvalue) and row["p_holm"] == row["p"]
     drawn = []
-    monkeypatch.setattr(beyond_report, "band", lambda ax, xs, values, variant: drawn.append(variant))
-    beyond_report.distance_figure(distance, {"Reacher-v4": ["ppo"]}, tmp_path / "goal_distance.png")
+    monkeypatch.setattr(figures, "band", lambda ax, xs, values, variant: drawn.append(variant))
+    figures.distance_figure(distance, {"Reacher-v4": ["ppo"]}, tmp_path / "goal_distance.png")
     assert drawn == ["ppo"]
 
 
@@ -366,17 +367,18 @@ def test_the_committed_beyond_report_is_what_its_committed_csvs_give(tmp_path):
     whose report was not rewritten fails here. Floats are compared to 1e-9 (another CPU may round a sum
     differently); the report's rounded text exactly, but for its line naming the folder."""
     from beyond import report as beyond_report
+    from beyond import sets as beyond_sets
 
     beyond = ROOT / "results" / "beyond"
     for path in [*beyond.glob("*/episodes.csv"), *beyond.glob("*/heldout_gamma.csv"), *beyond.glob("*.csv"),
-                 *beyond.glob(f"{beyond_report.BC_FOLDER}/*.csv"),
-                 *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/episodes.csv"),
-                 *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_gamma.csv"),
-                 *beyond.glob(f"{beyond_report.BC_TRAIN_FOLDER}/*/heldout_fresh.csv"),
-                 *beyond.glob(f"{beyond_report.COMMAND_FOLDER}/*.csv"), *beyond.glob("*/learned_null.csv"),
-                 *beyond.glob(f"{beyond_report.DROPOUT_FOLDER}/*.csv"),
-                 *beyond.glob(f"{beyond_report.DROPOUT_FOLDER}/*/tracking.csv"),
-                 *beyond.glob(f"{beyond_report.DROPOUT_FOLDER}/*/learned_null.csv")]:  # fmt: skip
+                 *beyond.glob(f"{beyond_sets.BC_FOLDER}/*.csv"),
+                 *beyond.glob(f"{beyond_sets.BC_TRAIN_FOLDER}/*/episodes.csv"),
+                 *beyond.glob(f"{beyond_sets.BC_TRAIN_FOLDER}/*/heldout_gamma.csv"),
+                 *beyond.glob(f"{beyond_sets.BC_TRAIN_FOLDER}/*/heldout_fresh.csv"),
+                 *beyond.glob(f"{beyond_sets.COMMAND_FOLDER}/*.csv"), *beyond.glob("*/learned_null.csv"),
+                 *beyond.glob(f"{beyond_sets.DROPOUT_FOLDER}/*.csv"),
+                 *beyond.glob(f"{beyond_sets.DROPOUT_FOLDER}/*/tracking.csv"),
+                 *beyond.glob(f"{beyond_sets.DROPOUT_FOLDER}/*/learned_null.csv")]:  # fmt: skip
         (tmp_path / path.relative_to(beyond)).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / path.relative_to(beyond)).write_bytes(path.read_bytes())
     continuous = ROOT / "results" / "continuous"
@@ -404,7 +406,10 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
     difference is where the paired test's power reaches 80%; n/a where no seed differs."""
     from scipy import stats
 
+    from beyond import fitted_null
     from beyond import report as beyond_report
+    from beyond import sets as beyond_sets
+    from paper_study import stats as study_stats
 
     def cloned(rows, episode_seed):
         gain = {1.0: 0.0, 1.2: 0.1, 1.5: 0.05}  # the cloned null gains at 1.2 and keeps most of it at 1.5
@@ -414,7 +419,7 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
 
     own = beyond_rows("Hopper-v4", "ppo", {1_000_000: [2000, 2100, 2200, 2300, 2400]}, gammas=(1.0, 1.2, 1.5))
     own_fresh = beyond_rows("Hopper-v4", "ppo", {1_000_000: [2050, 2000, 2250, 2200, 2500]}, gammas=(1.0, 1.2, 1.5))
-    folder = tmp_path / "beyond" / beyond_report.BC_FOLDER
+    folder = tmp_path / "beyond" / beyond_sets.BC_FOLDER
     write_rows(tmp_path / "table.csv", own)
     write_rows(folder / "episodes.csv", cloned(own, 10_000))
     write_rows(folder / "heldout_fresh.csv", cloned(own_fresh[::-1], 20_000))  # rows in another order
@@ -422,12 +427,12 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
     none = str(tmp_path / "none.csv")
     args = beyond_report.Args(folder=str(tmp_path / "beyond"), table=str(tmp_path / "table.csv"), table_heldout=none,
                               discrete_table=none, discrete_heldout=none)  # fmt: skip
-    means, fresh, sets, heldout = beyond_report.read_bc(tmp_path / "beyond", args)
+    means, fresh, sets, heldout = fitted_null.read_bc(tmp_path / "beyond", args)
     assert sets == [("Hopper-v4", "ppo")] and not heldout
     values = []
-    lines = beyond_report.bc_section(means, fresh, sets, heldout, values)
+    lines = fitted_null.bc_section(means, fresh, sets, heldout, values)
     number = {(r["variant"], r["baseline"], r["quantity"]): r["value"] for r in values}
-    bc = "ppo" + beyond_report.BC
+    bc = "ppo" + beyond_sets.BC
     best_own, best_bc = number[("ppo", "question 3", "best γ")], number[(bc, "question 3", "best γ")]
     at = lambda key, gamma: fresh[("Hopper-v4", key, 1_000_000, gamma)]
     returns_bc, returns_own = at(bc, best_bc), at("ppo", best_own)
@@ -445,5 +450,5 @@ def test_beyond_report_question_3_pairs_each_agents_own_null_with_its_behaviour_
     assert power == pytest.approx(0.8, abs=1e-6)
     assert number[("", "question 3", "γ = 1 cells equal")] == 1
     assert any("| Hopper-v4 | PPO | behaviour-cloned |" in line for line in lines)
-    assert beyond_report.paired_test({1: 1.0, 2: 2.0}, {1: 0.0, 2: 0.5}) is None  # two seeds: no test
-    assert beyond_report.paired_test({1: 1.0, 2: 1.0, 3: 1.0}, {1: 1.0, 2: 1.0, 3: 1.0}) is None  # no spread
+    assert study_stats.paired_test({1: 1.0, 2: 2.0}, {1: 0.0, 2: 0.5}) is None  # two seeds: no test
+    assert study_stats.paired_test({1: 1.0, 2: 1.0, 3: 1.0}, {1: 1.0, 2: 1.0, 3: 1.0}) is None  # no spread

@@ -1,4 +1,4 @@
-"""The command task's section of "Beyond the paper" (beyond/report.py), on a synthetic set: the real
+"""The command task's section of "Beyond the paper" (beyond/command.py, beyond/command_text.py), on a synthetic set: the real
 one is trained by results/beyond/command/run_all.sh."""
 
 import csv
@@ -7,24 +7,27 @@ import numpy as np
 import pytest
 from conftest import ROOT  # noqa: F401  (puts the repository on sys.path)
 
-from beyond import report as beyond_report
+from beyond import command_text, figures
+from beyond import sets as beyond_sets
 from beyond.command_tracking import COLUMNS
+from paper_study import agreement
+from paper_study import stats as study_stats
 from pgg_utils.files import write_csv_atomic
 
 GAMMAS, COMMANDS = (0.5, 1.0, 2.0), (-0.5, 0.0, 1.0, 2.0, 3.0)
-ENV = beyond_report.COMMAND_ENV
+ENV = beyond_sets.COMMAND_ENV
 
 
 def achieved(variant: str, seed: int, gamma: float, command: float, episode: int) -> float:
     """A synthetic agent: it follows 60% of the command, plus a seed's offset; under the command null γ scales how
     much of the command it follows (the knob), the other nulls ignore γ."""
-    follows = 0.6 * (gamma if variant == beyond_report.COMMAND_NULL else 1.0)
+    follows = 0.6 * (gamma if variant == beyond_sets.COMMAND_NULL else 1.0)
     return min(follows * command, 2.2) + 0.05 * seed + 0.01 * episode + 0.02 * np.sin(3 * seed + 2 * gamma + command)
 
 
 def tracking_rows(seeds=range(1, 6), skip=()) -> list[dict]:
     rows = []
-    for variant in beyond_report.COMMAND_VARIANTS:
+    for variant in beyond_sets.COMMAND_VARIANTS:
         for seed in seeds:
             for gamma in GAMMAS:
                 for command in COMMANDS:
@@ -47,7 +50,7 @@ def section(tmp_path, rows) -> tuple[str, dict]:
     if rows is not None:
         write_csv_atomic(folder / "command" / "tracking.csv", COLUMNS, rows)
     values = []
-    text = "\n".join(beyond_report.command_section(folder, values))
+    text = "\n".join(command_text.command_section(folder, values))
     return text, {(v["variant"], v["baseline"], v["quantity"]): v["value"] for v in values}
 
 
@@ -86,9 +89,9 @@ def test_the_verdict_counts_what_the_tests_found_and_waits_for_a_whole_set(tmp_p
     set gets no verdict."""
     text, values = section(tmp_path, tracking_rows())
     verdict = next(line for line in text.splitlines() if line.startswith("**What these tests say, and no more.**"))
-    above = [(v, g) for v in beyond_report.COMMAND_VARIANTS for g in GAMMAS if g > 1]
+    above = [(v, g) for v in beyond_sets.COMMAND_VARIANTS for g in GAMMAS if g > 1]
     falls = [(v, g) for v, g in above if values[(v, "γ 1", f"tracking error change at γ {g:g}")] < 0
-             and values[(v, "γ 1", f"tracking error p Holm at γ {g:g}")] < beyond_report.ALPHA]  # fmt: skip
+             and values[(v, "γ 1", f"tracking error p Holm at γ {g:g}")] < study_stats.ALPHA]  # fmt: skip
     assert f"{len(falls)} of the {len(above)} tests of a γ above 1" in verdict
     largest = -values[("pgg_g1.1_null17", "γ 1", "tracking error change at γ 2")]
     assert (
@@ -106,13 +109,13 @@ def test_a_missing_set_is_named_and_gives_no_numbers(tmp_path):
 
 def test_the_figure_draws_a_line_per_gamma_in_a_panel_per_variant(tmp_path, monkeypatch):
     lines = []
-    real_plot = beyond_report.plt.Axes.plot
+    real_plot = figures.plt.Axes.plot
     monkeypatch.setattr(
-        beyond_report.plt.Axes, "plot", lambda ax, *a, **k: lines.append(k.get("label")) or real_plot(ax, *a, **k)
+        figures.plt.Axes, "plot", lambda ax, *a, **k: lines.append(k.get("label")) or real_plot(ax, *a, **k)
     )
     section(tmp_path, tracking_rows())
     path = tmp_path / "fig.png"
-    assert beyond_report.command_figure(tmp_path / "beyond", path) and path.stat().st_size > 0
+    assert figures.command_figure(tmp_path / "beyond", path) and path.stat().st_size > 0
     assert sorted(filter(None, lines)) == sorted(f"γ = {g:g}" for g in GAMMAS for _ in range(3))
     with open(tmp_path / "beyond" / "command" / "tracking.csv", newline="") as f:
         assert len(list(csv.DictReader(f))) == 3 * 5 * 3 * 5 * 2
@@ -129,7 +132,7 @@ def test_the_tests_outside_the_range_say_what_they_can_detect(tmp_path):
     change = values[("ppo", "γ 1", "tracking error above the range change at γ 2")]
     p_holm = values[("ppo", "γ 1", "tracking error above the range p Holm at γ 2")]
     shown = values[("ppo", "γ 1", "tracking error above the range detectable at γ 2")]
-    assert f"({change:+.3f}, {beyond_report.fmt_p(p_holm)}; {shown:.3f})" in text
+    assert f"({change:+.3f}, {agreement.fmt_p(p_holm)}; {shown:.3f})" in text
     every = [v for (_, b, q), v in values.items() if b == "γ 1" and "the range detectable" in q]
     verdict = next(line for line in text.splitlines() if line.startswith("**What these tests say, and no more.**"))
     assert f"one test there detects {min(every):.3f} to {max(every):.3f} m/s before Holm" in verdict
@@ -141,7 +144,7 @@ def test_the_section_says_how_fast_agents_run_at_the_top_of_the_range(tmp_path):
     variant, from the episodes: whether the agents cover the range the tests above it presume."""
     text, values = section(tmp_path, tracking_rows())
     speeds = {v: [np.mean([achieved(v, s, 1.0, 2.0, e) for e in range(2)]) for s in range(1, 6)]
-              for v in beyond_report.COMMAND_VARIANTS}  # fmt: skip
+              for v in beyond_sets.COMMAND_VARIANTS}  # fmt: skip
     every = [x for v in speeds for x in speeds[v]]
     assert values[("", "command", "velocity at command 2 at γ 1")] == pytest.approx(np.mean(every))
     assert values[("ppo", "", "velocity at command 2 at γ 1")] == pytest.approx(np.mean(speeds["ppo"]))

@@ -13,19 +13,21 @@ from conftest import ROOT
 from scipy import stats
 
 from beyond import condition_dropout as cd
+from beyond import dropout_sets, dropout_tests, figures
 from beyond import report as beyond_report
+from beyond import sets as beyond_sets
 from beyond.command_tracking import COLUMNS
 from beyond.goal_distance import COLUMNS as GOAL_COLUMNS
 from beyond.learned_null import COLUMNS as NULL_COLUMNS
 from paper_study.stats import detectable_gap
 from pgg_utils.files import write_csv_atomic
 
-CMD, REACHER = beyond_report.COMMAND_ENV, cd.GOAL_ENV
-DROP, NULL17, GOAL_DROP = cd.COMMAND_DROPOUT, beyond_report.COMMAND_NULL, cd.GOAL_DROPOUT
+CMD, REACHER = beyond_sets.COMMAND_ENV, beyond_sets.GOAL_ENV
+DROP, NULL17, GOAL_DROP = beyond_sets.COMMAND_DROPOUT, beyond_sets.COMMAND_NULL, beyond_sets.GOAL_DROPOUT
 COMMANDS = (-0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 BASE_GAMMAS, DROP_GAMMAS = (0.5, 1.0, 2.0, 3.0), (0.5, 0.8, 1.0, 2.0, 3.0)  # the dropout set has a γ more
 GOAL_GAMMAS = (1.0, 1.1, 1.2, 1.5)
-LEVEL, VS_ONE = cd.SECTION, f"{cd.SECTION} vs γ 1"
+LEVEL, VS_ONE = dropout_tests.SECTION, f"{dropout_tests.SECTION} vs γ 1"
 
 
 def achieved(variant: str, seed: int, gamma: float, command: float, episode: int) -> float:
@@ -99,9 +101,9 @@ def write_folder(tmp_path, drop_seeds=range(1, 6), drop_skip=(), goal=True, drop
     return folder
 
 
-def section(folder) -> tuple[str, dict, cd.Sets]:
+def section(folder) -> tuple[str, dict, dropout_sets.Sets]:
     values = []
-    sets = cd.read(folder)
+    sets = dropout_sets.read(folder)
     text = "\n".join(cd.section(sets, values))
     return text, {(v["env_id"], v["variant"], v["baseline"], v["quantity"]): v["value"] for v in values}, sets
 
@@ -154,13 +156,13 @@ def test_absent_dropout_sets_are_said_in_one_line_each_and_give_no_number(tmp_pa
         and "Partial set" not in text
         and "What these tests say" not in text
     )
-    assert {k[2] for k in values} == {f"{cd.SECTION} learned null"}
+    assert {k[2] for k in values} == {f"{dropout_tests.SECTION} learned null"}
     assert (
         "| command task | PGG, γ_train = 1.1, null on dims 17 (command null) | 5 | 0.70, 0.82, 0.68, 0.73, 0.87 | 0.76 m/s"
         in text
     )
     assert "Not measured yet: PGG, dropout 0.1, null on dims 17 (command task)" in text
-    assert not cd.figure(sets, tmp_path / "fig.png") and not (tmp_path / "fig.png").exists()
+    assert not figures.dropout_figure(sets, tmp_path / "fig.png") and not (tmp_path / "fig.png").exists()
     assert cd.FIGURE not in text
 
 
@@ -258,7 +260,7 @@ def test_the_dropout_sets_change_is_tested_against_each_other_variants_by_welch(
             ours, theirs = change(DROP, gamma), change(baseline, gamma)
 
             def key(kind, baseline=baseline, gamma=gamma):
-                return (CMD, DROP, f"{cd.SECTION} vs {baseline}", f"tracking error {kind} at γ {gamma:g}")
+                return (CMD, DROP, f"{dropout_tests.SECTION} vs {baseline}", f"tracking error {kind} at γ {gamma:g}")
 
             assert values[key("difference")] == pytest.approx(np.mean(ours) - np.mean(theirs))
             assert values[key("p")] == pytest.approx(stats.ttest_ind(ours, theirs, equal_var=False).pvalue)
@@ -266,7 +268,7 @@ def test_the_dropout_sets_change_is_tested_against_each_other_variants_by_welch(
                 detectable_gap(np.std(ours, ddof=1), 5, np.std(theirs, ddof=1), 5, 0.05)
             )
     for measure in ("tracking error", "gain"):
-        against = {f"{cd.SECTION} vs {b}" for b in (NULL17, "pgg_g1.1", "ppo")}
+        against = {f"{dropout_tests.SECTION} vs {b}" for b in (NULL17, "pgg_g1.1", "ppo")}
         tests = {k: v for k, v in values.items() if k[2] in against and re.fullmatch(rf"{measure} p at γ [\d.]+", k[3])}
         assert len(tests) == 9
         for key, p_holm in zip(tests, holm_reference(list(tests.values()))):
@@ -301,7 +303,7 @@ def test_the_verdict_counts_what_the_tests_found(tmp_path):
     assert (
         f"Per band inside the range: {len(band_falls)} falls" in verdict and f"and {len(band_rises)} rises" in verdict
     )
-    welch = [k for k, v in values.items() if k[1] == DROP and k[2] in {f"{cd.SECTION} vs {b}" for b in (NULL17, "pgg_g1.1", "ppo")}
+    welch = [k for k, v in values.items() if k[1] == DROP and k[2] in {f"{dropout_tests.SECTION} vs {b}" for b in (NULL17, "pgg_g1.1", "ppo")}
              and re.fullmatch(r"tracking error p Holm at γ (2|3)", k[3]) and v < 0.05]  # fmt: skip
     assert f"in error: {len(welch)} of 6 differences significant after Holm" in verdict
     outside = [v for k, v in values.items() if k[1] == DROP and k[2] == VS_ONE
@@ -348,9 +350,9 @@ def test_reacher_distance_is_tested_against_gamma_one_and_against_the_goal_null(
         assert values[(REACHER, variant, VS_ONE, name.replace(" p at", " p Holm at"))] == pytest.approx(p_holm)
     ours = [seeds(GOAL_DROP, 1.5)[s] - seeds(GOAL_DROP, 1.0)[s] for s in range(1, 6)]
     theirs = [seeds("pgg_g1.1_goal", 1.5)[s] - seeds("pgg_g1.1_goal", 1.0)[s] for s in range(1, 6)]
-    assert values[(REACHER, GOAL_DROP, f"{cd.SECTION} vs pgg_g1.1_goal", "final distance p at γ 1.5")] == pytest.approx(
-        stats.ttest_ind(ours, theirs, equal_var=False).pvalue
-    )
+    assert values[
+        (REACHER, GOAL_DROP, f"{dropout_tests.SECTION} vs pgg_g1.1_goal", "final distance p at γ 1.5")
+    ] == pytest.approx(stats.ttest_ind(ours, theirs, equal_var=False).pvalue)
     falls = [k for k, p in family(values, REACHER, VS_ONE, r"final distance p Holm at γ [\d.]+").items()
              if k[0] == GOAL_DROP and p < 0.05]  # fmt: skip
     assert f"With the goal dropped in training, {len(falls)} of the 3 tests" in text and falls
@@ -369,7 +371,7 @@ def test_the_learned_nulls_are_tabled_with_and_without_dropout(tmp_path):
              ("condition_dropout/command", null_rows(CMD, DROP, [1.01, 0.95, 1.2])),
              ("Reacher-v4", null_rows(REACHER, "pgg_g1.1_goal", [(0.03, -0.04), (0.0, 0.1)]))]  # fmt: skip
     text, values, _ = section(write_folder(tmp_path, nulls=nulls))
-    learned = f"{cd.SECTION} learned null"
+    learned = f"{dropout_tests.SECTION} learned null"
     assert values[(CMD, DROP, learned, "pseudo-command mean")] == pytest.approx(np.mean([1.01, 0.95, 1.2]))
     assert values[(CMD, NULL17, learned, "pseudo-command min")] == 0.68
     assert values[(CMD, NULL17, learned, "KL to own condition mean")] == pytest.approx(13.0)
@@ -389,12 +391,12 @@ def test_the_learned_nulls_are_tabled_with_and_without_dropout(tmp_path):
 def test_the_figure_draws_four_variants_per_band_and_on_reacher(tmp_path, monkeypatch):
     """A panel per band (5) and Reacher's, each with its four variants; the section links it."""
     drawn = []
-    real_band = cd.band
-    monkeypatch.setattr(cd, "band", lambda ax, xs, values, variant, label: drawn.append((id(ax), variant))
+    real_band = figures.band
+    monkeypatch.setattr(figures, "band", lambda ax, xs, values, variant, label: drawn.append((id(ax), variant))
                         or real_band(ax, xs, values, variant, label))  # fmt: skip
     text, _, sets = section(write_folder(tmp_path))
     path = tmp_path / "fig.png"
-    assert cd.figure(sets, path) and path.stat().st_size > 0 and f"]({cd.FIGURE})" in text
+    assert figures.dropout_figure(sets, path) and path.stat().st_size > 0 and f"]({cd.FIGURE})" in text
     panels = {}
     for ax, variant in drawn:
         panels.setdefault(ax, []).append(variant)
@@ -423,5 +425,6 @@ def test_the_report_writes_the_section_and_its_figure_from_the_folder(tmp_path):
     assert folder / cd.FIGURE in written and (folder / cd.FIGURE).stat().st_size > 0
     with open(folder / "report_values.csv", newline="") as f:
         assert any(
-            r["baseline"] == cd.SECTION and r["quantity"] == "tracking error at γ 0.8" for r in csv.DictReader(f)
+            r["baseline"] == dropout_tests.SECTION and r["quantity"] == "tracking error at γ 0.8"
+            for r in csv.DictReader(f)
         )

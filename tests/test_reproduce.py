@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT, one_line_error
 
 import reproduce
-from beyond import report as beyond_report
+from beyond import sets as beyond_sets
 from paper_study import paper
 from pgg_utils import checkpoints
 from pgg_utils.files import RECORD, InputError, lock_directory, read_csv, sha256_of
@@ -370,19 +370,19 @@ def test_the_grids_variants_are_named_by_variant_id_and_keep_todays_ids():
     def family(flag: str) -> set[str]:
         return {variant for variant, flags in named.items() if flag in flags}
 
-    assert beyond_report.CLONING_VARIANTS == family("--null-bc-coef")
-    assert beyond_report.GOAL_VARIANTS == family("{goal}") - family("--cond-dropout")
-    assert set(beyond_report.DROPOUT_VARIANTS) == family("--null-dims") & family("--cond-dropout")
-    assert beyond_report.SCHEDULE_VARIANTS == family("--guidance-schedule")
-    assert beyond_report.BEYOND_VARIANT_IDS == set(GRID_VARIANTS[len(paper.VARIANTS) :])
-    assert set(beyond_report.COMMAND_VARIANTS) <= set(GRID_VARIANTS)
+    assert beyond_sets.CLONING_VARIANTS == family("--null-bc-coef")
+    assert beyond_sets.GOAL_VARIANTS == family("{goal}") - family("--cond-dropout")
+    assert set(beyond_sets.DROPOUT_VARIANTS) == family("--null-dims") & family("--cond-dropout")
+    assert beyond_sets.SCHEDULE_VARIANTS == family("--guidance-schedule")
+    assert beyond_sets.BEYOND_VARIANT_IDS == set(GRID_VARIANTS[len(paper.VARIANTS) :])
+    assert set(beyond_sets.COMMAND_VARIANTS) <= set(GRID_VARIANTS)
     assert {v for v in GRID_VARIANTS if paper.paper_rows(v) is not None} == {"ppo", "pgg_g1.1"}
     # the other readers' literal ids, which would otherwise drop a comparison or a colour without a word
     import plot_results
     from paper_study import figures
     from paper_study.data import read_dropout_figure
 
-    assert set(beyond_report.BASELINES) <= set(paper.PAPER_ORDER) == set(figures.VARIANT_COLOURS)
+    assert set(beyond_sets.BASELINES) <= set(paper.PAPER_ORDER) == set(figures.VARIANT_COLOURS)
     assert {variant for _, variant in plot_results.PAPER_FIGURE_GAMMAS} <= set(paper.PAPER_ORDER)
     assert {variant for variant, _ in read_dropout_figure.LINE_COLOURS} <= set(paper.PAPER_ORDER)
 
