@@ -39,7 +39,7 @@ EPISODE_COLUMNS = [
 CHECKSUM = "checksum"  # a cell file's last column: each row proves that it is whole and whose it is
 # This project's top-level modules (pyproject.toml's py-modules and packages): part of a cell's key wherever
 # they lie, an installed copy's site-packages too, as no version in the key stands for them.
-PROJECT_MODULES = frozenset({"pgg_utils", "paper_study", "beyond", "ppo_pgg_discrete", "ppo_pgg_continuous", "eval_gamma_sweep",
+PROJECT_MODULES = frozenset({"pgg_utils", "paper_study", "ppo_pgg_discrete", "ppo_pgg_continuous", "eval_gamma_sweep",
                              "plot_results", "reproduce"})  # fmt: skip
 INSTALLED_FOLDER_NAMES = {"site-packages", "dist-packages"}
 
