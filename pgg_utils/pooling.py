@@ -65,13 +65,14 @@ def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tup
     return mean, float((high - low) / 2), float(low), float(high)
 
 
-def seed_means(rows, key) -> dict:
+def seed_means(rows, key, value: str = "return") -> dict:
     """{key(row): {seed: mean return over that seed's episodes}}, seeds in numeric order: the per-seed
     mean that every statistic over seeds starts from (the sweep's summary, the tables, the paper study).
-    The returns of a seed are summed in row order."""
+    The returns of a seed are summed in row order. `value`: the per-episode column averaged, the return unless
+    a reader averages another (a goal distance's `final_distance`)."""
     returns = defaultdict(lambda: defaultdict(list))
     for row in rows:
-        returns[key(row)][int(row["seed"])].append(float(row["return"]))
+        returns[key(row)][int(row["seed"])].append(float(row[value]))
     return {k: {seed: float(np.mean(v)) for seed, v in sorted(by_seed.items())} for k, by_seed in returns.items()}
 
 
