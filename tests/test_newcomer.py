@@ -41,6 +41,7 @@ def error_lines(stderr: str) -> list[str]:
 DYING_WORKER = """
 import os, signal, sys
 import eval_gamma_sweep as sweep
+from pgg_utils import sweep as engine
 real_run_job = engine.run_job
 def killed_at_gamma_5(job):
     if job.gamma == 5.0:
