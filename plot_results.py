@@ -106,17 +106,17 @@ from paper_study.summary import (
     ROOT,
     config_labels,
     provenance_entry,
-    read_episodes,
     read_provenance,
     seeds_short,
     short_cells_note,
     short_configurations_note,
     summarise,
     table_csv,
+    table_kinds,
 )
 from pgg_utils import files
 from pgg_utils.episodes import episodes_csv as sweep_csv
-from pgg_utils.episodes import select_mode
+from pgg_utils.episodes import read_episodes, select_mode
 from pgg_utils.files import (
     MANIFEST,
     InputError,
@@ -517,7 +517,7 @@ def generate_locked(args: Args) -> list[Path]:
 def write_outputs(args: Args, output: Path, written: list[Path]) -> None:
     """The tables, figures and reports, each recorded in `written` once it is complete."""
     provenance = read_provenance(args.provenance)
-    episodes = read_episodes(args.sweeps)
+    episodes = read_episodes(args.sweeps, check=table_kinds)
     summary = summarise(select_mode(episodes, args.policy, args.null_branch), provenance)
     steps = sorted({int(r["step"]) for r in summary})
     if args.response_step is not None and args.response_step not in steps:

@@ -45,11 +45,12 @@ import numpy as np
 import torch
 import tyro
 
-import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import tasks
+from pgg_utils.arguments import DEFAULT_GAMMAS
 from pgg_utils.checkpoints import latest_checkpoint
+from pgg_utils.evaluation import GuidedPolicy, evaluate_cell, load_any_checkpoint
 from pgg_utils.runs import train_in_process
 
 CLEANRL_SPS = {"CartPole-v1": (3400, 4000), "Hopper-v4": (780, 780)}
@@ -252,21 +253,22 @@ def checkpoints_by_env(paths) -> dict[str, Path]:
     by_env = {}
     for path in map(Path, paths):
         try:
-            by_env[sweep.load_any_checkpoint(path)[1]["env_id"]] = path
+            by_env[load_any_checkpoint(path)[1]["env_id"]] = path
         except ValueError as e:
             sys.exit(f"error: --sweep-checkpoints {path}: {str(e).splitlines()[0]}")
     return by_env
 
 
 def sweep_rates(checkpoint: Path, gammas, episodes: int) -> tuple[float, float]:
-    agent, ckpt = sweep.load_any_checkpoint(checkpoint)
-    policy = sweep.GuidedPolicy(agent, ckpt)
-    start = time.perf_counter()
-    _, _, steps = sweep.evaluate_batched(policy, ckpt, gammas, episodes, 10_000, False)
+    agent, ckpt = load_any_checkpoint(checkpoint)
+    policy = GuidedPolicy(agent, ckpt)
+    start = time.perf_counter()  # the sweep's cells: one per γ, its episodes stepping together (evaluate_cell)
+    steps = sum(int(evaluate_cell(policy, ckpt, gamma, episodes, 10_000, False)["length"].sum()) for gamma in gammas)
     batched = steps / (time.perf_counter() - start)
-    start, sequential_steps = time.perf_counter(), 0
+    start, sequential_steps = time.perf_counter(), 0  # the reference: each episode k a cell of its own, one at a time
     for gamma in gammas:
-        sequential_steps += int(sweep.evaluate_sequential(policy, ckpt, gamma, episodes, 10_000, False)[1].sum())
+        for k in range(episodes):
+            sequential_steps += int(evaluate_cell(policy, ckpt, gamma, 1, 10_000 + k, False)["length"].sum())
     sequential = sequential_steps / (time.perf_counter() - start)
     return batched, sequential
 
@@ -365,7 +367,7 @@ def main() -> None:
             quick = make_args(1.1)
             quick.total_timesteps = 4 * quick.num_envs * quick.num_steps
             checkpoint = sweep_checkpoint(given_checkpoints, env_id, module, quick, tmp)
-            gammas = sweep.PAPER_GAMMAS["discrete" if module is ppo_pgg_discrete else "continuous"]
+            gammas = DEFAULT_GAMMAS["discrete" if module is ppo_pgg_discrete else "continuous"]
             batched, sequential = sweep_rates(checkpoint, gammas, args.sweep_episodes)
         rows += [
             (env_id, "sweep, batched evaluator (env steps/s)", f"{batched:,.0f}"),

@@ -63,10 +63,10 @@ QUICK = ["reproduce.py", "--preset", "quick", "--total-timesteps", "8192", "--ch
          "--episodes", "4", "--workers", "1"]  # fmt: skip
 AGENTS = "results/beyond/{}/agents/{}"
 BEYOND = {
-    "goal_distance": ["beyond/goal_distance.py", AGENTS.format("Reacher-v4", "Reacher-v4__pgg_g1.1_goal__s1"),
+    "goal_distance": ["beyond.goal_distance", AGENTS.format("Reacher-v4", "Reacher-v4__pgg_g1.1_goal__s1"),
                       "results/continuous/agents/Pusher-v4__pgg_g1.1__s1", "--steps", "1000000", "--gammas", "1", "1.3",
                       "--output", "out/goal_distance.csv"],
-    "command_tracking": ["beyond/command_tracking.py",
+    "command_tracking": ["beyond.command_tracking",
                          AGENTS.format("command", "paper_study.cheetah_velocity-HalfCheetahVelocity-v0__pgg_g1.1__s1"),
                          "--steps", "1000000", "--gammas", "1.5", "--commands", "0", "2.5",
                          "--output", "out/tracking.csv"],

@@ -7,7 +7,7 @@ and achieved mean forward velocity, the tracking error and the return, for "Beyo
 
 Each checkpoint is loaded by the code that trained it (pgg_utils.scripts.load_checkpoint), its task made by that
 script's make_env and checked against the spaces it was trained on. Each (checkpoint, γ, command) cell is a sweep
-cell of --episodes episodes, played by the sweep's own loop (eval_gamma_sweep.evaluate_cell: the episodes step
+cell of --episodes episodes, played by the sweep's own loop (pgg_utils.evaluation.evaluate_cell: the episodes step
 together through the agent's `act`, one row each): episode k resets with seed eval_seed + k and
 `options={"command": v}` and draws the sweep's action noise for episode k, so every γ and command of a
 checkpoint starts from the same states with the same noise. A row holds the
@@ -30,9 +30,8 @@ import numpy as np
 import torch
 import tyro
 
-import eval_gamma_sweep as sweep
 from paper_study.cheetah_velocity import HalfCheetahVelocity
-from pgg_utils import scripts, spaces
+from pgg_utils import evaluation, scripts, spaces
 from pgg_utils.checkpoints import find_checkpoints
 from pgg_utils.files import InputError, one_line_errors, read_csv, write_csv_atomic
 from pgg_utils.identity import variant_id
@@ -68,7 +67,7 @@ def settings_key(args: Args) -> str:
     return hashlib.sha1(json.dumps(settings).encode()).hexdigest()[:12]
 
 
-class Tracking(sweep.EpisodeHooks):
+class Tracking(evaluation.EpisodeHooks):
     """Commands every episode of a cell to `command` and sums its forward velocity and its tracking error."""
 
     def __init__(self, command: float, episodes: int):
@@ -84,9 +83,9 @@ class Tracking(sweep.EpisodeHooks):
 
 
 def play_cell(policy, ckpt: dict, gamma: float, command: float, episodes: int, eval_seed: int) -> list[dict]:
-    """The rows of one (γ, command) cell of `policy` (eval_gamma_sweep.GuidedPolicy)."""
+    """The rows of one (γ, command) cell of `policy` (pgg_utils.evaluation.GuidedPolicy)."""
     tracking = Tracking(command, episodes)
-    cell = sweep.evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, False, tracking)
+    cell = evaluation.evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, False, tracking)
     returns, lengths = cell["return"], cell["length"]
     mean_velocity = tracking.velocity_sum / lengths
     return [{"eval_guidance": gamma, "command": command, "episode": k, "episode_seed": eval_seed + k,
@@ -120,12 +119,12 @@ def evaluate_checkpoint(path: Path, args: Args) -> tuple[list[dict], str | None]
     header = {"env_id": ckpt["env_id"], "variant": variant_id({"env_id": ckpt["env_id"], **ckpt["args"]}),
               "run": path.parent.parent.name, "seed": ckpt["args"]["seed"], "step": ckpt["step_mark"],
               "checkpoint_sha1": digest, "task_sha1": task_sha1}  # fmt: skip
-    policy, rows = sweep.GuidedPolicy(agent, ckpt, module=module), []
+    policy, rows = evaluation.GuidedPolicy(agent, ckpt, module=module), []
     for gamma in args.gammas:
         for command in args.commands:
             try:
                 cell = play_cell(policy, ckpt, gamma, command, args.episodes, args.eval_seed)
-            except sweep.EpisodeFault as e:
+            except evaluation.EpisodeFault as e:
                 return [], f"{path}: {e}"
             for row in cell:
                 rows.append({**header, **row, "in_training_range": "yes" if low <= command <= high else "no"})

@@ -4,7 +4,7 @@ distance of every episode against the eval γ, for "Beyond the paper" (beyond/re
     python -m beyond.goal_distance results/beyond/Reacher-v4/agents results/beyond/Pusher-v4/agents \\
         results/continuous/agents --envs Reacher-v4 Pusher-v4 --steps 1000000 --output results/beyond/goal_distance.csv
 
-Each (checkpoint, γ) is a sweep cell, played by the sweep's own loop (eval_gamma_sweep.evaluate_cell: reset
+Each (checkpoint, γ) is a sweep cell, played by the sweep's own loop (pgg_utils.evaluation.evaluate_cell: reset
 seed eval_seed + k and the sweep's action noise for episode k, the episodes stepping together through the
 agent's `act`), and each episode's distance is read from its last observation: Reacher's fingertip to target (dims 8-10), Pusher's object (17-19) to goal (20-22), from
 gymnasium's documentation of the v4 observations. The tasks' own `reward_dist` is measured before the
@@ -18,9 +18,8 @@ from pathlib import Path
 import numpy as np
 import tyro
 
-import eval_gamma_sweep as sweep
 from paper_study.paper import PAPER_GAMMAS
-from pgg_utils import checkpoints
+from pgg_utils import checkpoints, evaluation
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
 from pgg_utils.identity import variant_id
 
@@ -49,7 +48,7 @@ class Args:
     """episode k resets with seed eval_seed + k, as in the sweep"""
 
 
-class FinalDistance(sweep.EpisodeHooks):
+class FinalDistance(evaluation.EpisodeHooks):
     """The distance to the goal in each episode's last observation."""
 
     def __init__(self, env_id: str, episodes: int):
@@ -63,7 +62,7 @@ class FinalDistance(sweep.EpisodeHooks):
 def final_distances(policy, ckpt: dict, gamma: float, episodes: int, eval_seed: int) -> list[tuple[float, float]]:
     """(return, final distance) of each episode of one cell."""
     measured = FinalDistance(ckpt["env_id"], episodes)
-    returns = sweep.evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, False, measured)["return"]
+    returns = evaluation.evaluate_cell(policy, ckpt, gamma, episodes, eval_seed, False, measured)["return"]
     return [(float(total), distance) for total, distance in zip(returns, measured.distances)]
 
 
@@ -77,13 +76,13 @@ def main() -> None:
             raise InputError(f"none of {', '.join(args.paths)} exists")
         for path in checkpoints.find_checkpoints(present, args.steps):
             try:
-                agent, ckpt = sweep.load_any_checkpoint(path)
+                agent, ckpt = evaluation.load_any_checkpoint(path)
             except ValueError as e:  # unreadable, non-finite, or its script not found: one line, the rest measured
                 print(f"skipped {path}: {e}", file=sys.stderr)
                 continue
             if ckpt["env_id"] not in args.envs:
                 continue
-            variant, policy = variant_id(ckpt["args"]), sweep.GuidedPolicy(agent, ckpt)
+            variant, policy = variant_id(ckpt["args"]), evaluation.GuidedPolicy(agent, ckpt)
             for gamma in args.gammas:
                 for k, (total, distance) in enumerate(final_distances(policy, ckpt, gamma, args.episodes,
                                                                       args.eval_seed)):  # fmt: skip

@@ -8,7 +8,7 @@ training").
 
 The states are the agent's own: --episodes episodes at γ = 1, each with the condition the task draws (a command
 from the training range, a target in Reacher's disk), episode k reset with seed eval_seed + k and acted with the
-sweep's action noise for episode k (eval_gamma_sweep.episode_noise); every observation an action was taken on
+sweep's action noise for episode k (pgg_utils.evaluation.episode_noise); every observation an action was taken on
 is a state. On them, for each condition c of the task's grid (CONDITIONS), each state's condition is replaced by
 c and the mean over states of KL(π(·|s, ∅) ‖ π(·|s, c)) computed from the agent's own branches: its
 `acting_policy` at γ 0 (the null branch, exactly) and γ 1 (the conditional one), raw observations in, as the
@@ -30,10 +30,9 @@ import numpy as np
 import torch
 import tyro
 
-import eval_gamma_sweep as sweep
 from paper_study.cheetah_velocity import COMMAND_INDEX
 from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV
-from pgg_utils import scripts, spaces
+from pgg_utils import evaluation, scripts, spaces
 from pgg_utils.checkpoints import find_checkpoints
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
 from pgg_utils.identity import variant_id
@@ -100,7 +99,7 @@ def own_states(agent, make_env, episodes: int, eval_seed: int) -> np.ndarray:
     """The raw observations an agent acts on at γ = 1 over `episodes` episodes played together, in order."""
     envs = [make_env() for _ in range(episodes)]
     horizon, action_size = envs[0].spec.max_episode_steps, envs[0].action_space.shape[0]
-    noise = np.stack([sweep.episode_noise("continuous", eval_seed, k, horizon, action_size) for k in range(episodes)],
+    noise = np.stack([evaluation.episode_noise("continuous", eval_seed, k, horizon, action_size) for k in range(episodes)],
                      axis=1)  # fmt: skip
     obs = np.stack([env.reset(seed=eval_seed + k)[0] for k, env in enumerate(envs)])
     running, states, t = np.ones(episodes, dtype=bool), [], 0

@@ -23,8 +23,8 @@ import tyro
 from paper_study.agreement import compare_row, fmt, fmt_p, p_is, step_label
 from paper_study.paper import paper_name, variant_rank
 from paper_study.stats import ALPHA, correct_family, sign_test
-from paper_study.summary import read_episodes, summarise
-from pgg_utils.episodes import select_mode
+from paper_study.summary import summarise, table_kinds
+from pgg_utils.episodes import read_episodes, select_mode
 from pgg_utils.files import InputError, one_line_errors, write_atomic
 
 
@@ -43,7 +43,7 @@ class Args:
 def cells(path: str) -> dict:
     """{(env, variant, step, eval γ): summary row} of one sweep; one configuration per env and variant
     (its config label and its exact training guidance and dropout)."""
-    rows = summarise(select_mode(read_episodes([path]), "sample", "learned"))
+    rows = summarise(select_mode(read_episodes([path], check=table_kinds), "sample", "learned"))
     configs = defaultdict(set)
     for r in rows:
         configs[(r["env_id"], r["variant"])].add((r["config"], r["train_guidance"], r["cond_dropout"]))

@@ -41,8 +41,9 @@ def group_key(row: dict) -> tuple:
     return (*configuration(row), int(row["step"]))
 
 
-def seed_means(rows: list[dict]) -> dict:
-    """{group: {γ: {seed: mean return over that cell's episodes}}} of one sweep's rows, which hold one run
+def by_gamma(rows: list[dict]) -> dict:
+    """pgg_utils.pooling.seed_means by group and γ: {group: {γ: {seed: mean return over that cell's episodes}}} of
+    one sweep's rows, which hold one run
     per configuration and seed (pgg_utils.episodes.read_episodes refuses pooled runs)."""
     cells = pooling.seed_means(rows, lambda row: (group_key(row), float(row["eval_guidance"])))
     out = defaultdict(dict)
@@ -155,7 +156,7 @@ def held_out(selection: list[dict], fresh: list[dict]) -> tuple[list[dict], list
     if not fresh:
         raise InputError("the fresh sweep has no episodes")
     check_same_checkpoints(selection, fresh)
-    selected, held = seed_means(selection), seed_means(fresh)
+    selected, held = by_gamma(selection), by_gamma(fresh)
     if not selected.keys() & held.keys():
         raise InputError("the two sweeps have no group (env, configuration, step) in common; sweep the fresh episodes "
                          "from the selection's run directories")  # fmt: skip

@@ -2,8 +2,9 @@
 evaluation mode, with the statistics over seeds of the per-seed mean return (pgg_utils.pooling), the
 label that tells configurations of one task and variant apart, its table (discrete or continuous) and
 the MuJoCo version and code revision behind it. plot_results.py writes its tables and figures from
-these rows; compare_sweeps, heldout_gamma and the dropout figure's reader use the same. Reads episodes
-with pgg_utils.episodes, the one reader."""
+these rows; compare_sweeps, heldout_gamma and the dropout figure's reader use the same. Its rows are read by
+pgg_utils.episodes.read_episodes, the one reader, and its statistics are pgg_utils.pooling.summarise's, the one
+summary over seeds."""
 
 import math
 from collections import defaultdict
@@ -13,26 +14,27 @@ import numpy as np
 
 from paper_study.agreement import series_id
 from paper_study.paper import action_kind, variant_rank
-from pgg_utils import episodes as sweep_episodes
 from pgg_utils.files import InputError, read_csv
 from pgg_utils.identity import config_fields, configuration, is_mujoco
-from pgg_utils.pooling import mean_ci95, seed_means
+from pgg_utils.pooling import summarise as summarise_seeds
 
 ROOT = Path(__file__).resolve().parent.parent
 KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
 
 
-def read_episodes(paths) -> list[dict]:
-    """Every episode row of the given sweeps (pgg_utils.episodes.read_episodes: checked, whole, never
-    pooled), each with its `kind` (the table its env belongs to) besides its `config` and `_source`."""
-    return sweep_episodes.read_episodes(paths, check=with_kinds)
-
-
-def with_kinds(rows: list[dict]) -> None:
-    """Gives each row its `kind`; InputError where the CSVs disagree on an env's."""
+def table_kinds(rows: list[dict]) -> dict:
+    """{env: the table it belongs to, discrete or continuous} of the episode rows (kind_of); InputError where the
+    CSVs disagree on an env's. The tables' readers pass it as pgg_utils.episodes.read_episodes's `check`, so that a
+    disagreement is said before anything else of the rows."""
+    first = {}  # env -> (kind, source)
     for row in rows:
-        row["kind"] = kind_of(row, Path(row["_source"]))
-    check_one_kind(rows)
+        kind = kind_of(row, Path(row["_source"]))
+        first_kind, source = first.setdefault(row["env_id"], (kind, row["_source"]))
+        if kind != first_kind:
+            raise InputError(
+                f"{row['env_id']} has {first_kind} actions in {source} and {kind} actions in {row['_source']}"
+            )
+    return {env: kind for env, (kind, _) in first.items()}
 
 
 def kind_of(row: dict, path: Path) -> str:
@@ -47,17 +49,6 @@ def kind_of(row: dict, path: Path) -> str:
         return action_kind(row["env_id"])
     except ValueError as e:
         raise InputError(f"{path} records no action_space for {row['env_id']}, and {e}") from None
-
-
-def check_one_kind(rows: list[dict]) -> None:
-    """An env belongs to one table: CSVs that disagree on its action space cannot both be right."""
-    first = {}  # env -> (kind, source)
-    for row in rows:
-        kind, source = first.setdefault(row["env_id"], (row["kind"], row["_source"]))
-        if kind != row["kind"]:
-            raise InputError(
-                f"{row['env_id']} has {kind} actions in {source} and {row['kind']} actions in {row['_source']}"
-            )
 
 
 def config_labels(configs: dict) -> dict:
@@ -88,29 +79,25 @@ def config_labels(configs: dict) -> dict:
 
 
 def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
-    """One row per (configuration, step, γ, policy, null branch): statistics over seeds of the per-seed
-    mean episodic return, with the configuration's label (`series`), its table (`kind`) and MuJoCo
-    version."""
-    per_seed = seed_means(rows, cell_key)
-    sources, fields, kinds, episodes = defaultdict(set), {}, {}, defaultdict(int)
+    """The tables' summary of episode rows (pgg_utils.episodes.read_episodes): pgg_utils.pooling.summarise per
+    (configuration, step, γ, policy, null branch), each with the configuration's label (`series`), its table
+    (`kind`), MuJoCo version and code revision, its seeds' standard deviation, and how many seeds its siblings hold."""
+    sources, fields = defaultdict(set), {}
     for row in rows:
         sources[configuration(row)].add(row["_source"])
         fields.setdefault(configuration(row), config_fields(row))
-        kinds[row["env_id"]] = row["kind"]
-        episodes[cell_key(row)] += 1
-    labels = config_labels({c: (fields[c], s) for c, s in sources.items()})
+    kinds, labels = table_kinds(rows), config_labels({c: (fields[c], s) for c, s in sources.items()})
     out = []
-    for key in sorted(per_seed, key=lambda k: (k[0], variant_rank(k[1]), *k[1:])):
+    for cell in summarise_seeds(rows, cell_key, lambda k: (k[0], variant_rank(k[1]), *k[1:])):
+        key, means = cell["key"], cell["seed_means"]
         env, variant, config, guidance, dropout, step, gamma, policy, null_branch = key
-        means = list(per_seed[key].values())
-        mean, half, _, _ = mean_ci95(means)
         out.append({
             "env_id": env, "variant": variant, "config": config, "train_guidance": guidance, "cond_dropout": dropout,
             "config_fields": fields[key[:5]], "kind": kinds[env], "series": labels[key[:5]],
             "step": step, "eval_guidance": gamma, "policy": policy, "null_branch": null_branch,
-            "n_seeds": len(means), "n_episodes": episodes[key],
-            "mean": mean, "ci95": half, "sd": float(np.std(means, ddof=1)) if len(means) > 1 else math.nan,
-            "seed_means": ";".join(f"{m:.4f}" for m in means), "seeds": list(per_seed[key]),
+            "n_seeds": len(means), "n_episodes": cell["n_episodes"],
+            "mean": cell["mean"], "ci95": cell["ci95"], "sd": float(np.std(means, ddof=1)) if len(means) > 1 else math.nan,
+            "seed_means": ";".join(f"{m:.4f}" for m in means), "seeds": cell["seeds"],
             "mujoco": mujoco_of(env, fields[key[:5]], sources[key[:5]], provenance), "sources": sorted(sources[key[:5]]),
             **code_of(sources[key[:5]], provenance),
         })  # fmt: skip

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 import tyro
 
-from pgg_utils import checkpoints, scripts
+from pgg_utils import checkpoints, evaluation, scripts
 from pgg_utils.files import InputError, one_line_errors, write_atomic
 from pgg_utils.identity import FITTED_NULL_SUFFIX, run_of
 
@@ -51,7 +51,7 @@ class Args:
 
 
 class OwnPolicy:
-    """The agent's policy at γ = 1 as the sweep's episode loop acts with it (eval_gamma_sweep.evaluate_cell, which
+    """The agent's policy at γ = 1 as the sweep's episode loop acts with it (pgg_utils.evaluation.evaluate_cell, which
     takes it in place of the sweep's GuidedPolicy), sampled with noise of its own: episode k's from
     np.random.default_rng([episode_seed + k, 2]), in float64 (standard normal; discrete, Gumbel). It keeps each
     step's samples, continuous ones before clipping to the bounds (the policy's own samples)."""
@@ -90,11 +90,10 @@ def own_episodes(agent, ckpt: dict, make_env, episodes: int, episode_seed: int) 
     """The sampled actions of `episodes` episodes of the agent's policy at γ = 1, played by the sweep's episode
     loop (all stepping together); continuous actions before clipping to the bounds (the policy's own samples).
     ValueError (one line) where the task raises or returns a NaN or an infinity."""
-    sweep = scripts.load_module(scripts.REPOSITORY / "eval_gamma_sweep.py")  # found by path, as a script is
     policy = OwnPolicy(agent, ckpt, make_env)
     try:
-        lengths = sweep.evaluate_cell(policy, ckpt, 1.0, episodes, episode_seed, False)["length"]
-    except sweep.EpisodeFault as e:
+        lengths = evaluation.evaluate_cell(policy, ckpt, 1.0, episodes, episode_seed, False)["length"]
+    except evaluation.EpisodeFault as e:
         raise ValueError(str(e)) from None
     return policy.seen_actions(lengths)
 

@@ -1,7 +1,8 @@
 """The sweep's cache of evaluated cells: one CSV per (checkpoint, γ, settings, evaluation stack, evaluating
 code), written atomically, each row with a checksum. A sweep reuses a cell only where the file is whole and
 every checksum holds, so an interrupted sweep loses only the cells in flight and a damaged or foreign
-file is evaluated again.
+file is evaluated again. A cell's identity holds the digest of every file of code that runs in its episodes
+(evaluation_code), found for each checkpoint with its task (evaluation_of).
 
 A cell holds the sweep's columns (EPISODE_COLUMNS) and, after them, whatever per-episode columns the sweep
 that wrote it adds (a copy of the sweep that measures more: eval_gamma_sweep.py, "Changing the episodes")."""
@@ -16,10 +17,15 @@ import os
 import site
 import sys
 import sysconfig
+from dataclasses import dataclass
 from pathlib import Path
 
-from pgg_utils import checkpoints
+import gymnasium as gym
+
+from pgg_utils import checkpoints, scripts, spaces
+from pgg_utils.evaluation import action_error, first_line
 from pgg_utils.files import InputError, read_csv, write_csv_atomic
+from pgg_utils.identity import run_of
 from pgg_utils.scripts import file_sha1
 
 # The packages whose versions decide an episode's numbers (MuJoCo's physics, gymnasium's tasks and
@@ -33,7 +39,7 @@ EPISODE_COLUMNS = [
 CHECKSUM = "checksum"  # a cell file's last column: each row proves that it is whole and whose it is
 # This project's top-level modules (pyproject.toml's py-modules and packages): part of a cell's key wherever
 # they lie, an installed copy's site-packages too, as no version in the key stands for them.
-PROJECT_MODULES = frozenset({"pgg_utils", "paper_study", "beyond", "ppo_pgg_discrete", "ppo_pgg_continuous", "eval_gamma_sweep",
+PROJECT_MODULES = frozenset({"pgg_utils", "paper_study", "ppo_pgg_discrete", "ppo_pgg_continuous", "eval_gamma_sweep",
                              "plot_results", "reproduce"})  # fmt: skip
 INSTALLED_FOLDER_NAMES = {"site-packages", "dist-packages"}
 
@@ -225,3 +231,95 @@ def read_cell(path: Path, episodes: int) -> list[dict]:
     if {row["episode"] for row in rows} != {str(k) for k in range(episodes)}:
         raise ValueError(f"its episodes are not 0..{episodes - 1} each once")
     return rows
+
+
+# --- what evaluates a checkpoint: its script, its task, the digest of their code ---------------------------
+
+
+EVALUATED_BY_COLUMNS = [
+    "run",
+    "step",
+    "env_id",
+    "config",
+    "trained_by",
+    "evaluated_by",
+    "evaluated_by_sha1",
+    "same_script",
+]
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """How a checkpoint is evaluated: by which script file, and the fingerprint of the code that computes
+    its cells (part of each cell's identity), with the row evaluated_by.csv gets."""
+
+    script: Path
+    evaluator: str
+    record: dict
+
+
+@dataclass(frozen=True)
+class Task:
+    """A checkpoint's task as the script that evaluates it makes it: its spaces, and the digest of every file
+    of code that runs in a cell's episodes (evaluation_code)."""
+
+    observation_space: gym.Space
+    action_space: gym.Space
+    code: str
+
+
+def evaluation_code(sweeper: Path, script: Path, task_files) -> str:
+    """The digest of the code that runs in a cell's episodes: the file of the sweep (`sweeper`: eval_gamma_sweep.py
+    or a copy of it, whichever runs, and through its imports this engine), the script that evaluates the checkpoint, a custom task's module (scripts.task_sources;
+    gymnasium's own tasks are named by its version in the stack), and every module that these import, wherever
+    it lies, but installed packages and the standard library, which the stack's versions name (cells.imported_files).
+    An edit to any of them, or another copy of the sweep, re-evaluates the cells."""
+    return code_digest(imported_files([sweeper, script, *task_files]))
+
+
+def task_of(module, sweeper: Path, script: Path, env_id: str) -> Task:
+    """The task of `env_id` as `module` makes it. ValueError (one line) where it cannot be made or has no time limit."""
+    try:
+        env = module.make_env(env_id)()
+    except Exception as e:  # a custom task's module gone, an id no longer registered: whatever make raises
+        raise ValueError(f"cannot make environment {env_id!r} ({first_line(e)})") from None
+    task = Task(
+        env.observation_space, env.action_space, evaluation_code(sweeper, script, scripts.task_sources(env_id, env))
+    )
+    bounded = env.spec is not None and env.spec.max_episode_steps
+    env.close()
+    if not bounded:
+        raise ValueError(f"{env_id} has no time limit (max_episode_steps), so an episode may never end; "
+                         "register it with one, e.g. gym.register(..., max_episode_steps=1000)")  # fmt: skip
+    return task
+
+
+def task_error(ckpt: dict, task: Task) -> str | None:
+    """One line where the task's spaces are not those the checkpoint was trained on (spaces.mismatch), or
+    its actions are not ones the sweep can act in (action_error)."""
+    if error := action_error(ckpt, task.action_space):
+        return error
+    if error := spaces.mismatch(spaces.recorded(ckpt), task.observation_space, task.action_space):
+        return f"its task {ckpt['env_id']} has changed since training: {error}; not evaluated"
+    return None
+
+
+def evaluation_of(checkpoint: Path, ckpt: dict, given: tuple[Path, ...], tasks: dict, sweeper: Path) -> Evaluation:
+    """How a checkpoint is evaluated, by the script that trained it, and the fingerprint of the code that
+    computes its cells (evaluation_code, with `sweeper`, the sweep's file). `tasks` caches the task by (script, env). ValueError (one line)
+    where the script cannot be found or load the checkpoint, or the task cannot be made or is not the one it
+    was trained on (task_error)."""
+    _, module, script = scripts.load_agent(ckpt, checkpoint, given)  # proves its Agent holds the weights, once
+    key = (script, ckpt["env_id"])
+    if key not in tasks:
+        tasks[key] = task_of(module, sweeper, script, ckpt["env_id"])
+    if error := task_error(ckpt, tasks[key]):
+        raise ValueError(error)
+    script_sha1 = scripts.file_sha1(script)
+    trained_sha1 = ckpt.get("code", {}).get("script_sha1")
+    same = "unknown" if trained_sha1 is None else "yes" if trained_sha1 == script_sha1 else "no"
+    evaluator = tasks[key].code
+    record = {"run": run_of(ckpt, checkpoint), "step": ckpt["step_mark"], "env_id": ckpt["env_id"],
+              "trained_by": scripts.script_name(ckpt), "evaluated_by": scripts.recorded_path(script),
+              "evaluated_by_sha1": script_sha1, "same_script": same}  # fmt: skip
+    return Evaluation(script, evaluator, record)

@@ -1,9 +1,11 @@
 """Pooling over seeds, once: the rule behind every statistic over seeds (within one configuration a seed
 is one run, and each episode of a cell is counted once), the per-seed mean return every such statistic
-starts from (seed_means), and the statistic itself, the mean over seeds and its 95% confidence interval."""
+starts from (seed_means), the statistic itself, the mean over seeds and its 95% confidence interval (mean_ci95), and
+the two together per group of rows (summarise), which the sweep's summary.csv and the paper study's tables both
+start from."""
 
 import math
-from collections import defaultdict
+from collections import Counter, defaultdict
 
 import numpy as np
 from scipy import stats
@@ -63,11 +65,28 @@ def mean_ci95(values, method: str = "t", bootstrap_samples: int = 10_000) -> tup
     return mean, float((high - low) / 2), float(low), float(high)
 
 
-def seed_means(rows, key) -> dict:
+def seed_means(rows, key, value: str = "return") -> dict:
     """{key(row): {seed: mean return over that seed's episodes}}, seeds in numeric order: the per-seed
     mean that every statistic over seeds starts from (the sweep's summary, the tables, the paper study).
-    The returns of a seed are summed in row order."""
+    The returns of a seed are summed in row order. `value`: the per-episode column averaged, the return unless
+    a reader averages another (a goal distance's `final_distance`)."""
     returns = defaultdict(lambda: defaultdict(list))
     for row in rows:
-        returns[key(row)][int(row["seed"])].append(float(row["return"]))
+        returns[key(row)][int(row["seed"])].append(float(row[value]))
     return {k: {seed: float(np.mean(v)) for seed, v in sorted(by_seed.items())} for k, by_seed in returns.items()}
+
+
+def summarise(rows, key, order=None, method: str = "t", bootstrap_samples: int = 10_000) -> list[dict]:
+    """Statistics over seeds of the per-seed mean return, one entry per group `key(row)`, sorted by `order(group)`:
+    {"key": the group, "seeds": its seeds in numeric order, "seed_means": their mean returns (seed_means),
+    "n_episodes": its rows, "mean", "ci95", "ci_low", "ci_high": mean_ci95 of the seed means (`method`)}, unrounded.
+    The one summary over seeds: the sweep's summary.csv (pgg_utils.sweep.summary_rows) and the paper study's
+    tables (paper_study.summary.summarise) add their columns to it."""
+    per_seed, episodes = seed_means(rows, key), Counter(map(key, rows))
+    out = []
+    for group in sorted(per_seed, key=order):
+        means = list(per_seed[group].values())
+        mean, half, low, high = mean_ci95(means, method, bootstrap_samples)
+        out.append({"key": group, "seeds": list(per_seed[group]), "seed_means": means, "n_episodes": episodes[group],
+                    "mean": mean, "ci95": half, "ci_low": low, "ci_high": high})  # fmt: skip
+    return out

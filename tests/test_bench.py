@@ -344,18 +344,18 @@ def test_beyond_report_pairs_goal_distances_by_seed_and_draws_only_the_variants_
 
 
 def test_goal_distance_is_the_fingertip_to_target_distance_of_the_last_observation():
-    import eval_gamma_sweep as sweep
     import ppo_pgg_continuous
     from beyond import goal_distance
+    from pgg_utils import evaluation
 
     torch.manual_seed(0)
     agent = ppo_pgg_continuous.Agent(11, 2, null_dims=(4, 5, 8, 9, 10), action_bounds=(-np.ones(2), np.ones(2)))
     ckpt = {"env_id": "Reacher-v4", "action_space": "continuous", "obs_dim": 11, "action_dim": 2}
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     (total, distance), *_ = goal_distance.final_distances(policy, ckpt, 1.5, 2, 10_000)
     env = policy.make_env()  # the same episode by hand: its fingertip-to-target vector at the end
     obs, _ = env.reset(seed=10_000)
-    noise = sweep.episode_noise("continuous", 10_000, 0, 50, 2)
+    noise = evaluation.episode_noise("continuous", 10_000, 0, 50, 2)
     for t in range(50):
         obs, *_ = env.step(policy.act(obs[None], np.array([1.5]), noise[t : t + 1], False)[0])
     assert distance == pytest.approx(np.linalg.norm(obs[8:11])) and total < 0

@@ -119,8 +119,8 @@ def test_a_sweeps_code_lists_no_installed_or_standard_library_file(tmp_path, mon
     """The files a real sweep keys its cells by: the sweep, the script, this package, and nothing of torch,
     numpy, gymnasium, tyro or the standard library."""
     listed = []
-    real_digest = sweep.code_digest
-    monkeypatch.setattr(sweep, "code_digest", lambda found: listed.extend(found) or real_digest(found))
+    real_digest = cells.code_digest
+    monkeypatch.setattr(cells, "code_digest", lambda found: listed.extend(found) or real_digest(found))
     sweep.sweep(sweep_args(tmp_path / "out", gammas=(1.0,), episodes=1))
     assert {ROOT / "eval_gamma_sweep.py", ROOT / "ppo_pgg_discrete.py", ROOT / "pgg_utils" / "fast.py"} <= set(listed)
     assert all(ROOT in path.parents for path in listed), listed

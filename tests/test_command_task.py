@@ -125,7 +125,7 @@ def test_tracking_replays_each_episode_as_the_agent_acts_alone(command_run, tmp_
     for row in (r for r in rows if r["episode"] == 0):
         env = gym.make(ENV_ID)
         k, gamma, command = row["episode"], row["eval_guidance"], row["command"]
-        noise = command_tracking.sweep.episode_noise("continuous", args.eval_seed, k, 1000, 6)
+        noise = command_tracking.evaluation.episode_noise("continuous", args.eval_seed, k, 1000, 6)
         obs, _ = env.reset(seed=args.eval_seed + k, options={"command": command})
         x0, total, velocities = env.unwrapped.data.qpos[0], 0.0, []
         for t in range(1000):

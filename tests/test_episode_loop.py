@@ -15,7 +15,7 @@ import ppo_pgg_continuous
 import ppo_pgg_discrete
 from beyond import command_tracking, goal_distance
 from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV_ID
-from pgg_utils import bc_null, files, spaces
+from pgg_utils import bc_null, evaluation, files, spaces
 
 
 def test_the_video_of_a_sweep_copy_films_its_own_cell_episode_with_its_return(tmp_path, capsys):
@@ -70,12 +70,12 @@ def cloning_agent(kind: str):
 def test_goal_distance_tracking_and_cloning_play_their_episodes_through_the_sweeps_loop(monkeypatch):
     """Fails where one of them plays its episodes with a loop of its own: an edit to the sweep's loop (an
     observation transform, a fix) would not reach it."""
-    played, real_cell = [], sweep.evaluate_cell
-    monkeypatch.setattr(sweep, "evaluate_cell", lambda *a, **k: played.append(a[2]) or real_cell(*a, **k))
+    played, real_cell = [], evaluation.evaluate_cell
+    monkeypatch.setattr(evaluation, "evaluate_cell", lambda *a, **k: played.append(a[2]) or real_cell(*a, **k))
     agent, ckpt = reacher_agent()
-    goal_distance.final_distances(sweep.GuidedPolicy(agent, ckpt), ckpt, 1.5, 2, 10_000)
+    goal_distance.final_distances(evaluation.GuidedPolicy(agent, ckpt), ckpt, 1.5, 2, 10_000)
     agent, ckpt = command_agent()
-    policy = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_continuous)
+    policy = evaluation.GuidedPolicy(agent, ckpt, module=ppo_pgg_continuous)
     command_tracking.play_cell(policy, ckpt, 2.0, 0.5, 1, 30_000)
     agent, ckpt = cloning_agent("discrete")
     bc_null.own_episodes(agent, ckpt, ppo_pgg_discrete.make_env("CartPole-v1"), 2, 30_000)
@@ -88,10 +88,10 @@ def test_goal_distance_tracking_and_cloning_play_their_episodes_through_the_swee
 
 def goal_distance_before(policy, ckpt, gamma, episodes, eval_seed):
     env = policy.make_env()
-    horizon, action_size = sweep.horizon_and_action_size(env, ckpt)
+    horizon, action_size = evaluation.horizon_and_action_size(env, ckpt)
     out = []
     for k in range(episodes):
-        noise = sweep.episode_noise("continuous", eval_seed, k, horizon, action_size)
+        noise = evaluation.episode_noise("continuous", eval_seed, k, horizon, action_size)
         obs, _ = env.reset(seed=eval_seed + k)
         total, t, done = 0.0, 0, False
         while not done:
@@ -105,7 +105,7 @@ def goal_distance_before(policy, ckpt, gamma, episodes, eval_seed):
 def tracking_before(agent, make_env, gamma, command, episodes, eval_seed):
     envs = [make_env() for _ in range(episodes)]
     horizon, action_size = envs[0].spec.max_episode_steps, envs[0].action_space.shape[0]
-    noise = np.stack([sweep.episode_noise("continuous", eval_seed, k, horizon, action_size) for k in range(episodes)],
+    noise = np.stack([evaluation.episode_noise("continuous", eval_seed, k, horizon, action_size) for k in range(episodes)],
                      axis=1)  # fmt: skip
     obs = np.stack([env.reset(seed=eval_seed + k, options={"command": command})[0] for k, env in enumerate(envs)])
     guidance = np.full(episodes, float(gamma))
@@ -159,13 +159,13 @@ def test_going_through_the_sweeps_loop_changed_no_number():
     revisions.) Every forward here has the same row count in both loops, cell_rows(1) = cell_rows(5) = 8, and a
     row's result depends on its own values and the row count (fast.evaluation_forward)."""
     agent, ckpt = reacher_agent()
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     assert goal_distance.final_distances(policy, ckpt, 1.5, 3, 10_000) == goal_distance_before(
         policy, ckpt, 1.5, 3, 10_000
     )
 
     agent, ckpt = command_agent()
-    policy = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_continuous)
+    policy = evaluation.GuidedPolicy(agent, ckpt, module=ppo_pgg_continuous)
     rows = command_tracking.play_cell(policy, ckpt, 2.0, 3.0, 2, 30_000)
     columns = ("return", "length", "mean_velocity", "velocity_error", "tracking_error")
     assert [tuple(row[c] for c in columns) for row in rows] == tracking_before(
@@ -184,14 +184,14 @@ def test_going_through_the_sweeps_loop_changed_no_number():
 def test_the_fixture_sweep_is_unchanged_by_the_hooks():
     """The sweep's cells with hooks that only watch are the cells without them."""
 
-    class Watching(sweep.EpisodeHooks):
+    class Watching(evaluation.EpisodeHooks):
         steps = 0
 
         def after_step(self, episode, t, obs, reward, done, info):
             self.steps += 1
 
-    agent, ckpt = sweep.load_any_checkpoint(FIXTURE)
-    policy, watching = sweep.GuidedPolicy(agent, ckpt), Watching()
-    watched = sweep.evaluate_cell(policy, ckpt, 2.0, 4, 10_000, False, watching)
-    plain = sweep.evaluate_cell(policy, ckpt, 2.0, 4, 10_000, False)
+    agent, ckpt = evaluation.load_any_checkpoint(FIXTURE)
+    policy, watching = evaluation.GuidedPolicy(agent, ckpt), Watching()
+    watched = evaluation.evaluate_cell(policy, ckpt, 2.0, 4, 10_000, False, watching)
+    plain = evaluation.evaluate_cell(policy, ckpt, 2.0, 4, 10_000, False)
     assert all(np.array_equal(watched[c], plain[c]) for c in plain) and watching.steps == plain["length"].sum()

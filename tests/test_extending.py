@@ -27,7 +27,8 @@ import plot_results
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from paper_study import paper
-from pgg_utils import checkpoints, fast, files, identity, runs, scripts
+from pgg_utils import checkpoints, evaluation, fast, files, identity, runs, scripts
+from pgg_utils import sweep as engine
 from pgg_utils.arguments import ARGUMENT_RULES, RUN_ONLY_ARGS
 from pgg_utils.guidance import ADAPTIVE_STEP, GuidanceSchedule
 from pgg_utils.identity import FROZEN_DEFAULTS, GOAL_DIMS
@@ -191,7 +192,7 @@ def test_an_actor_with_layer_norm_acts_as_its_module_and_the_first_ratio_is_one(
     run_dir = train(module, small_args(kind, tmp_path, guidance=1.3, cond_dropout=0.0))
     assert first["losses/clipfrac"].item() == 0.0 and abs(first["losses/approx_kl"].item()) < 1e-6
     # the sweep acts through the same module: its deterministic action is the module's guided output
-    agent, ckpt = sweep.load_any_checkpoint(checkpoints.checkpoints_of(run_dir)[-1])
+    agent, ckpt = evaluation.load_any_checkpoint(checkpoints.checkpoints_of(run_dir)[-1])
     assert any(isinstance(m, nn.LayerNorm) for m in getattr(agent, network))
     raw = np.random.default_rng(0).normal(size=(8, ckpt["obs_dim"]))
     with torch.no_grad():
@@ -199,7 +200,7 @@ def test_an_actor_with_layer_norm_acts_as_its_module_and_the_first_ratio_is_one(
             expected = agent.policy(torch.as_tensor(raw, dtype=torch.float32), 1.3).mode().numpy()
         else:
             expected = agent.policy(agent.obs_norm(raw), 1.3).mode().clamp(-0.4, 0.4).numpy()
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     actions = policy.act(raw, np.full(8, 1.3), None, deterministic=True)
     np.testing.assert_allclose(actions, expected, rtol=1e-5, atol=1e-6)
 
@@ -271,7 +272,7 @@ def test_act_from_a_loaded_agent_is_the_sweeps_policy(tmp_path):
     mean = agent.act(raw, guidance=1.2, deterministic=True)
     assert mean.shape == env.action_space.shape and np.abs(mean).max() <= 0.4  # Humanoid's bounds
     noise = np.random.default_rng(0).standard_normal((1, mean.shape[0])).astype(np.float32)
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     np.testing.assert_array_equal(agent.act(raw[None], 1.2, noise=noise), policy.act(raw[None], np.array([1.2]), noise,
                                                                                     False))  # fmt: skip
     torch.manual_seed(0)
@@ -423,7 +424,7 @@ def test_training_and_the_sweep_sample_gumbel_noise_through_one_function():
     assert noise.dtype == np.float32 and np.array_equal(noise, fast.standard_gumbel(torch.rand(6, 4).numpy()))
     uniform = np.random.default_rng([10_000 + 2, 1]).uniform(np.finfo(np.float32).tiny, 1.0, size=(50, 4))
     expected = fast.standard_gumbel(uniform).astype(np.float32)
-    assert np.array_equal(sweep.episode_noise("discrete", 10_000, 2, 50, 4), expected)
+    assert np.array_equal(evaluation.episode_noise("discrete", 10_000, 2, 50, 4), expected)
     assert np.isfinite(fast.standard_gumbel(np.zeros(3, np.float32))).all()  # a uniform draw of 0 stays finite
 
 
@@ -552,8 +553,10 @@ def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_origi
     original.load_state_dict(ckpt["model"])
     for gamma in (1.0, 1.5):
         swept = [float(r["return"]) for r in rows if r["run"] == "fork_s1" and float(r["eval_guidance"]) == gamma]
-        own = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt), ckpt, gamma, 3, 10_000, True)["return"]
-        tanh = sweep.evaluate_cell(sweep.GuidedPolicy(original.eval(), ckpt), ckpt, gamma, 3, 10_000, True)["return"]
+        own = evaluation.evaluate_cell(evaluation.GuidedPolicy(agent, ckpt), ckpt, gamma, 3, 10_000, True)["return"]
+        tanh = evaluation.evaluate_cell(evaluation.GuidedPolicy(original.eval(), ckpt), ckpt, gamma, 3, 10_000, True)[
+            "return"
+        ]
         assert swept == own.tolist() and swept != tanh.tolist()
     # The original script's loader refuses the fork's checkpoint in one line.
     with pytest.raises(ValueError, match="was trained by .*ppo_pgg_relu.py, not ppo_pgg_continuous.py"):
@@ -586,8 +589,8 @@ def test_an_edited_script_or_task_is_evaluated_again_never_read_from_the_cache(t
     train_script(fork, tmp_path, "run_s1", seed=1)
     first = sweep_rows(tmp_path, "sweep", fork)
     evaluated = []
-    real_run_job = sweep.run_job
-    monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
+    real_run_job = engine.run_job
+    monkeypatch.setattr(engine, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
     assert sweep_rows(tmp_path, "sweep", fork) == first and not evaluated  # unchanged: every cell reused
     fork.write_text(fork.read_text().replace("nn.ReLU()", "nn.Tanh()"))  # the Agent edited after the sweep
     scripts.load_module.cache_clear()

@@ -21,7 +21,8 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import checkpoints, files, identity, pooling
+from pgg_utils import cells, checkpoints, evaluation, files, identity, pooling
+from pgg_utils import sweep as engine
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
 FORMAT_1 = FIXTURES / "cartpole_format1" / "checkpoints" / "step_000000512.pt"
@@ -39,14 +40,17 @@ def outputs(output: Path) -> tuple[str, str]:
 
 
 def count_jobs(monkeypatch) -> list:
-    evaluated, real_run_job = [], sweep.run_job
-    monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
+    evaluated, real_run_job = [], engine.run_job
+    monkeypatch.setattr(engine, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
     return evaluated
 
 
 def test_the_sweep_shares_the_packages_classes():
-    """Callers catch pgg_utils' InputError, and plot_results reports the sweep's statistic."""
-    assert sweep.InputError is files.InputError and sweep.mean_ci95 is pooling.mean_ci95
+    """Callers catch pgg_utils' InputError, and plot_results reports the sweep's statistic: one summary over seeds."""
+    from paper_study import summary
+
+    assert sweep.InputError is engine.InputError is files.InputError
+    assert engine.summarise is summary.summarise_seeds is pooling.summarise
 
 
 # --- damaged cells are evaluated again -----------------------------------------------------------------
@@ -147,7 +151,7 @@ def test_a_full_disk_is_one_line_naming_the_file_and_leaves_no_temporary_file(tm
 
 
 def test_rows_record_the_stack_and_a_cell_of_another_mujoco_is_evaluated_again(tmp_path, monkeypatch):
-    assert sweep.EPISODE_COLUMNS[-5:] == ["mujoco", "gymnasium", "numpy", "torch", "action_space"]
+    assert cells.EPISODE_COLUMNS[-5:] == ["mujoco", "gymnasium", "numpy", "torch", "action_space"]
     real_versions = checkpoints.package_versions
     monkeypatch.setattr(checkpoints, "package_versions", lambda: {**real_versions(), "mujoco": "2.3.3"})
     args = sweep_args(tmp_path / "out", episodes=4)
@@ -161,7 +165,7 @@ def test_rows_record_the_stack_and_a_cell_of_another_mujoco_is_evaluated_again(t
     here = files.read_csv(tmp_path / "out" / "episodes.csv")
     versions = real_versions()
     for row in here:
-        assert [row[p] for p in sweep.STACK_COLUMNS] == [versions[p] or "none" for p in sweep.STACK_COLUMNS]
+        assert [row[p] for p in cells.STACK_COLUMNS] == [versions[p] or "none" for p in cells.STACK_COLUMNS]
         assert row["action_space"] == "discrete"
     assert [(r["return"], r["length"]) for r in here] == [(r["return"], r["length"]) for r in elsewhere]
     assert len(list((tmp_path / "out" / "cells").glob("*.csv"))) == 4  # both kept, each under its own stack
@@ -199,7 +203,7 @@ sweep.sweep(sweep.Args(paths=({str(seed_2)!r},), output={str(tmp_path / "after")
     proc = subprocess.run([sys.executable, "-c", drifted], check=False, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
     rows = [*files.read_csv(tmp_path / "before" / "episodes.csv"), *files.read_csv(tmp_path / "after" / "episodes.csv")]
-    (series,) = sweep.summarise(rows)
+    (series,) = engine.summary_rows(rows)
     assert series["config"] == FIXTURE_LABEL and series["n_seeds"] == 2
 
 
@@ -230,7 +234,7 @@ def test_a_checkpoint_with_non_finite_weights_or_statistics_is_skipped_never_eva
     (tmp_path / "cwd").mkdir()
     monkeypatch.chdir(tmp_path / "cwd")  # where MuJoCo would write MUJOCO_LOG.TXT about NaN controls
     evaluated = count_jobs(monkeypatch)
-    with pytest.raises(sweep.InputError, match="no checkpoint could be evaluated"):
+    with pytest.raises(files.InputError, match="no checkpoint could be evaluated"):
         sweep.sweep(sweep_args(tmp_path / "out", cartpole, hopper, gammas=(1.0, 1.5), episodes=2))
     assert evaluated == [] and files.read_csv(tmp_path / "out" / "episodes.csv") == []
     reasons = [row["reason"] for row in files.read_csv(tmp_path / "out" / "skipped.csv")]
@@ -244,7 +248,7 @@ def test_a_checkpoint_with_non_finite_weights_or_statistics_is_skipped_never_eva
 
 @pytest.mark.parametrize("path,version", [(FORMAT_1, 1), (FORMAT_2, 2)])
 def test_fixture_checkpoints_of_both_formats_load_and_sweep_to_finite_returns(tmp_path, path, version):
-    agent, ckpt = sweep.load_any_checkpoint(path)
+    agent, ckpt = evaluation.load_any_checkpoint(path)
     assert ckpt["format_version"] == version and ("resume" in ckpt) == ("versions" in ckpt) == (version == 2)
     assert torch.equal(agent.null_obs.detach(), ckpt["model"]["null_obs"])
     out = sweep.sweep(sweep_args(tmp_path / "out", path, episodes=2))

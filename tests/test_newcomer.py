@@ -41,12 +41,13 @@ def error_lines(stderr: str) -> list[str]:
 DYING_WORKER = """
 import os, signal, sys
 import eval_gamma_sweep as sweep
-real_run_job = sweep.run_job
+from pgg_utils import sweep as engine
+real_run_job = engine.run_job
 def killed_at_gamma_5(job):
     if job.gamma == 5.0:
         os.kill(os.getpid(), signal.SIGKILL)
     return real_run_job(job)
-sweep.run_job = killed_at_gamma_5
+engine.run_job = killed_at_gamma_5
 sys.argv = ["eval_gamma_sweep.py", *sys.argv[1:]]
 sweep.main()
 """

@@ -463,7 +463,7 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
 def test_plot_results_imports_neither_torch_nor_the_training_scripts():
     """Tables from committed CSVs, and a usage error, need no torch (seconds to import) and no training code."""
     code = ("import plot_results, sys; assert 'torch' not in sys.modules; "
-            "assert not {'eval_gamma_sweep', 'ppo_pgg_discrete', 'ppo_pgg_continuous'} & set(sys.modules)")  # fmt: skip
+            "assert not {'eval_gamma_sweep', 'ppo_pgg_discrete', 'ppo_pgg_continuous', 'pgg_utils.sweep'} & set(sys.modules)")  # fmt: skip
     proc = subprocess.run(
         [sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=ROOT, check=False
     )
@@ -1065,18 +1065,18 @@ def test_the_paper_study_reads_episodes_without_plot_results(tmp_path):
 
 def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
     """The sweep's summary ordered seeds as text ("10" before "2"), the tables as numbers: both now take
-    pooling.seed_means, so one cell's seed_means reads the same in summary.csv and in the tables, and the
-    held-out selection's per-seed means are the same numbers."""
-    import eval_gamma_sweep as sweep
+    pooling.seed_means (through pooling.summarise), so one cell's seed_means reads the same in summary.csv and in
+    the tables, and the held-out selection's per-seed means are the same numbers."""
     from paper_study import selection
+    from pgg_utils import sweep as engine
 
     rows = [r | {"seed": seed, "run": f"CartPole-v1__ppo__s{seed}"}
             for seed in (2, 10) for r in episode_rows({("CartPole-v1", "ppo", 100000, 1.0): [20.0 * seed]})]  # fmt: skip
     write_episodes(tmp_path / "episodes.csv", rows)
     (table_cell,) = summary_of(tmp_path / "episodes.csv")
-    (sweep_cell,) = sweep.summarise([{k: str(v) for k, v in r.items()} for r in rows])
+    (sweep_cell,) = engine.summary_rows([{k: str(v) for k, v in r.items()} for r in rows])
     assert table_cell["seed_means"] == sweep_cell["seed_means"] == "40.0000;200.0000"
-    (group,) = selection.seed_means(plots.read_episodes([tmp_path / "episodes.csv"])).values()
+    (group,) = selection.by_gamma(plots.read_episodes([tmp_path / "episodes.csv"])).values()
     assert group == {1.0: {2: 40.0, 10: 200.0}}
 
 

@@ -15,10 +15,9 @@ import torch
 from conftest import ROOT, SCRIPTS, one_line_error, small_args, train
 from torch import nn
 
-import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import checkpoints, policy, runs, scripts
+from pgg_utils import checkpoints, evaluation, policy, runs, scripts
 
 # --- a fork that mixes σ per branch: the one place ---------------------------------------------------
 
@@ -97,12 +96,12 @@ def test_a_fork_that_mixes_sigma_per_branch_in_the_one_place_trains_and_acts_as_
     shared = ppo_pgg_continuous.Gaussian(agent.policy(agent.obs_norm(raw), 2.0).mean)
     assert not np.allclose(replayed_actions(agent, raw, 2.0, noise), np.clip(shared.mean.detach().numpy(), -0.4, 0.4))
     # the sweep's episodes are the replayed policy's: the same task steps, actions and noise, apart from its code
-    guided = sweep.GuidedPolicy(agent, ckpt, module=module)
-    swept = sweep.evaluate_cell(guided, ckpt, 2.0, 2, 10_000, False)["return"]
+    guided = evaluation.GuidedPolicy(agent, ckpt, module=module)
+    swept = evaluation.evaluate_cell(guided, ckpt, 2.0, 2, 10_000, False)["return"]
     for episode, swept_return in enumerate(swept):
         env = module.make_env(ckpt["env_id"])()
-        horizon, size = sweep.horizon_and_action_size(env, ckpt)
-        episode_noise = sweep.episode_noise("continuous", 10_000, episode, horizon, size)
+        horizon, size = evaluation.horizon_and_action_size(env, ckpt)
+        episode_noise = evaluation.episode_noise("continuous", 10_000, episode, horizon, size)
         obs, _ = env.reset(seed=10_000 + episode)
         total, done, t = 0.0, False, 0
         while not done:
@@ -199,10 +198,10 @@ def test_an_actor_with_batch_norm_trains_with_and_without_guidance(kind, guidanc
     assert isinstance(norm, nn.BatchNorm1d) and norm.num_batches_tracked > 0  # the updates trained it
     raw = np.random.default_rng(0).normal(size=(1, ckpt["obs_dim"]))
     assert np.isfinite(np.asarray(agent.act(raw, 1.5), dtype=np.float64)).all()  # one row acts
-    swept = sweep.evaluate_cell(sweep.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 2, 10_000, False)
+    swept = evaluation.evaluate_cell(evaluation.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 2, 10_000, False)
     assert np.isfinite(swept["return"]).all() and (swept["length"] > 0).all()  # the sweep's batched episodes
     running = norm.running_mean.clone()
-    sweep.evaluate_sequential(sweep.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 1, 10_000, False)
+    evaluation.evaluate_cell(evaluation.GuidedPolicy(agent, ckpt, module=module), ckpt, 1.5, 1, 10_000, False)
     assert torch.equal(norm.running_mean, running)  # evaluation moves no statistics
 
 
@@ -356,10 +355,10 @@ class CountingActor(ppo_pgg_discrete.Agent):
 def test_every_sweep_episode_starts_the_actor_from_a_fresh_state():
     agent = CountingActor()
     ckpt = {"action_space": "discrete", "env_id": "CartPole-v1", "n_actions": 2}
-    guided = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
-    lengths = sweep.evaluate_sequential(guided, ckpt, 1.0, 3, 10_000, True)[1]
-    sweep.evaluate_cell(guided, ckpt, 1.0, 2, 10_000, True)
-    assert min(lengths) > 1 and agent.first_steps == [1, 1, 1, 1]  # the sequential path, then the cell's start
+    guided = evaluation.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
+    lengths = [evaluation.evaluate_cell(guided, ckpt, 1.0, 1, 10_000 + k, True)["length"][0] for k in range(3)]
+    evaluation.evaluate_cell(guided, ckpt, 1.0, 2, 10_000, True)
+    assert min(lengths) > 1 and agent.first_steps == [1, 1, 1, 1]  # three cells of one episode, then a cell of two
 
 
 def test_a_definition_written_for_torch_alone_acts_through_torch(monkeypatch):

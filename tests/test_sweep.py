@@ -21,7 +21,8 @@ from conftest import ROOT, default_sigint, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import cells, identity
+from pgg_utils import cells, evaluation, files, identity, pooling
+from pgg_utils import sweep as engine
 from pgg_utils.checkpoints import checkpoint_step
 from pgg_utils.files import read_csv
 from pgg_utils.processes import start_pool, stop_pool
@@ -67,17 +68,21 @@ def test_batched_evaluator_agrees_with_sequential_reference(runs, kind, determin
     flips a sampled or greedy action, which needs two noise-perturbed logits within ~1e-6 of each
     other. Continuous lengths are not asserted separately: a Hopper episode one step longer or
     shorter would change its return by a step's reward (~1), far beyond rtol."""
-    agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, kind))
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    agent, ckpt = evaluation.load_any_checkpoint(checkpoint(runs, kind))
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     gammas = (1.0, 1.5, 3.0)
-    returns, lengths, steps = sweep.evaluate_batched(policy, ckpt, gammas, 10, 10_000, deterministic)
-    assert steps == lengths.sum() and len(set(lengths.ravel().tolist())) > 1  # episodes end at different times
-    for g, gamma in enumerate(gammas):
-        ref_returns, ref_lengths = sweep.evaluate_sequential(policy, ckpt, gamma, 10, 10_000, deterministic)
-        np.testing.assert_allclose(returns[g], ref_returns, rtol=1e-4)
+    for gamma in gammas:
+        cell = evaluation.evaluate_cell(policy, ckpt, gamma, 10, 10_000, deterministic)  # the sweep's cell
+        returns, lengths = cell["return"], cell["length"]
+        assert len(set(lengths.tolist())) > 1  # its episodes end at different times
+        # The reference: episode k alone, a cell of one episode whose episode 0 is the cell's k (same seed, noise).
+        alone = [evaluation.evaluate_cell(policy, ckpt, gamma, 1, 10_000 + k, deterministic) for k in range(10)]
+        ref_returns = np.concatenate([one["return"] for one in alone])
+        ref_lengths = np.concatenate([one["length"] for one in alone])
+        np.testing.assert_allclose(returns, ref_returns, rtol=1e-4)
         if kind == "discrete":
-            np.testing.assert_array_equal(lengths[g], ref_lengths)
-            np.testing.assert_array_equal(returns[g], ref_returns)
+            np.testing.assert_array_equal(lengths, ref_lengths)
+            np.testing.assert_array_equal(returns, ref_returns)
 
 
 def record_forward_rows(monkeypatch, perturb: float = 0.0) -> list[int]:
@@ -97,12 +102,14 @@ def record_forward_rows(monkeypatch, perturb: float = 0.0) -> list[int]:
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_every_forward_of_a_cell_has_the_same_shape(runs, kind, monkeypatch):
-    agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, kind))
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    agent, ckpt = evaluation.load_any_checkpoint(checkpoint(runs, kind))
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     rows = record_forward_rows(monkeypatch)
-    _, lengths, _ = sweep.evaluate_batched(policy, ckpt, (1.0, 2.0), 10, 10_000, False)
+    lengths = np.stack(
+        [evaluation.evaluate_cell(policy, ckpt, gamma, 10, 10_000, False)["length"] for gamma in (1.0, 2.0)]
+    )
     assert len(set(lengths.ravel().tolist())) > 1  # episodes ended at different times, yet:
-    assert set(rows) == {sweep.cell_rows(10)}
+    assert set(rows) == {evaluation.cell_rows(10)}
     assert len(rows) == 3 * (lengths[0].max() + lengths[1].max())  # three Linear layers a step, per cell
 
 
@@ -124,7 +131,7 @@ def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monk
     sweep.sweep(replace(alone, output=str(tmp_path / "beside"), gammas=(1.0, 2.0, 3.0, 5.0), workers=2))
     assert cell_texts(tmp_path / "beside", 2.0) == expected
 
-    real_run_job, calls = sweep.run_job, []
+    real_run_job, calls = engine.run_job, []
 
     def interrupt_third(job):
         calls.append(job)
@@ -132,11 +139,11 @@ def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monk
             raise KeyboardInterrupt
         return real_run_job(job)
 
-    monkeypatch.setattr(sweep, "run_job", interrupt_third)
+    monkeypatch.setattr(engine, "run_job", interrupt_third)
     resumed = replace(alone, output=str(tmp_path / "resumed"), gammas=(3.0, 2.0, 1.0))
     with pytest.raises(KeyboardInterrupt):
         sweep.sweep(resumed)
-    monkeypatch.setattr(sweep, "run_job", real_run_job)
+    monkeypatch.setattr(engine, "run_job", real_run_job)
     sweep.sweep(resumed)
     assert cell_texts(tmp_path / "resumed", 2.0) == expected
     episodes = (tmp_path / "resumed" / "episodes.csv").read_text()
@@ -146,7 +153,7 @@ def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monk
 
 def guided_branch(agent, ckpt, raw, guidance, uniform_null=False):
     """The guided logits or means the sweep's GuidedPolicy acts on."""
-    null = sweep.GuidedPolicy(agent, ckpt, uniform_null).null
+    null = evaluation.GuidedPolicy(agent, ckpt, uniform_null).null
     if ckpt["action_space"] == "continuous":
         return agent.acting_policy(raw, guidance, **null).mean
     return agent.acting_policy(raw.astype(np.float32), guidance, **null).logits
@@ -154,7 +161,7 @@ def guided_branch(agent, ckpt, raw, guidance, uniform_null=False):
 
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
-    agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, kind))
+    agent, ckpt = evaluation.load_any_checkpoint(checkpoint(runs, kind))
     raw = np.random.default_rng(0).normal(size=(16, ckpt["obs_dim"])) * 0.5
     guidance = ckpt["args"]["guidance"]
     evaluated = torch.from_numpy(guided_branch(agent, ckpt, raw, guidance))
@@ -176,11 +183,11 @@ def test_eval_at_training_guidance_reproduces_training_policy(runs, kind):
 
 
 def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
-    agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, "continuous"))
+    agent, ckpt = evaluation.load_any_checkpoint(checkpoint(runs, "continuous"))
     assert ckpt["action_low"] == [-1.0] * 3 and ckpt["action_high"] == [1.0] * 3  # Hopper's, not ClipAction's
     # Checkpoints saved before the fix hold ClipAction's infinite bounds; the env's still apply.
     ckpt = {**ckpt, "action_low": [-math.inf] * 3, "action_high": [math.inf] * 3}
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     raw = np.random.default_rng(2).normal(size=(64, ckpt["obs_dim"]))
     noise = np.random.default_rng(3).normal(size=(64, 3)) * 5
     actions = policy.act(raw, np.full(64, 30.0), noise, deterministic=False)
@@ -190,9 +197,11 @@ def test_continuous_actions_are_clipped_to_the_env_bounds(runs):
 def cell_file(output, checkpoint_file, gamma, settings, digest=None) -> Path:
     """cells.cell_path of a checkpoint file as a sweep in this process names it."""
     digest = digest or hashlib.sha1(Path(checkpoint_file).read_bytes()).hexdigest()
-    evaluation = sweep.evaluation_of(checkpoint_file, sweep.read_checkpoint(checkpoint_file)[1], (), {})
+    evaluated = cells.evaluation_of(
+        checkpoint_file, evaluation.read_checkpoint(checkpoint_file)[1], (), {}, ROOT / "eval_gamma_sweep.py"
+    )
     return cells.cell_path(output, checkpoint_file, gamma, settings, digest, cells.evaluation_stack(),
-                           evaluation.evaluator)  # fmt: skip
+                           evaluated.evaluator)  # fmt: skip
 
 
 def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, tmp_path):
@@ -211,7 +220,7 @@ def test_cells_follow_a_checkpoint_copied_elsewhere_but_not_a_changed_one(runs, 
 
 
 def test_uniform_null_control_is_temperature_scaling(runs):
-    agent, ckpt = sweep.load_any_checkpoint(checkpoint(runs, "discrete"))
+    agent, ckpt = evaluation.load_any_checkpoint(checkpoint(runs, "discrete"))
     raw = np.random.default_rng(1).normal(size=(10, 4)) * 0.1
     learned = torch.from_numpy(guided_branch(agent, ckpt, raw, 3.0)).softmax(-1)
     uniform = torch.from_numpy(guided_branch(agent, ckpt, raw, 3.0, uniform_null=True)).softmax(-1)
@@ -223,11 +232,11 @@ def test_uniform_null_control_is_temperature_scaling(runs):
 
 def test_ci_against_hand_computed_values():
     # mean 3; s = sqrt(2.5) = 1.58114; t_{0.975,4} = 2.776445; half = 2.776445 * 1.58114 / sqrt(5) = 1.963243
-    mean, half, low, high = sweep.mean_ci95([1, 2, 3, 4, 5])
+    mean, half, low, high = pooling.mean_ci95([1, 2, 3, 4, 5])
     assert mean == 3 and half == pytest.approx(1.963243, abs=1e-6) and low == pytest.approx(3 - 1.963243, abs=1e-6)
-    assert sweep.mean_ci95([500, 500, 500])[1] == 0.0
-    assert math.isnan(sweep.mean_ci95([7.0])[1])
-    mean, half, low, high = sweep.mean_ci95([1, 2, 3, 4, 5], method="bootstrap")
+    assert pooling.mean_ci95([500, 500, 500])[1] == 0.0
+    assert math.isnan(pooling.mean_ci95([7.0])[1])
+    mean, half, low, high = pooling.mean_ci95([1, 2, 3, 4, 5], method="bootstrap")
     assert mean == 3 and 1.8 <= low <= 2.2 and 3.8 <= high <= 4.2 and half == pytest.approx((high - low) / 2)
 
 
@@ -238,10 +247,10 @@ def test_summary_aggregates_per_seed_means():
         for seed, returns in [(1, [10, 20]), (2, [40, 40]), (3, [0, 60])]
         for r in returns
     ]  # fmt: skip
-    (row,) = sweep.summarise(rows)
+    (row,) = engine.summary_rows(rows)
     assert row["n_seeds"] == 3 and row["n_episodes"] == 6 and row["mean"] == round(85 / 3, 4)
     assert row["seed_means"] == "15.0000;40.0000;30.0000"
-    assert row["ci95"] == pytest.approx(round(sweep.mean_ci95([15, 40, 30])[1], 4))
+    assert row["ci95"] == pytest.approx(round(pooling.mean_ci95([15, 40, 30])[1], 4))
 
 
 def sweep_args(runs, output, **overrides):
@@ -255,7 +264,7 @@ def test_resume_after_interruption_gives_same_csv(runs, tmp_path, monkeypatch):
     expected = (tmp_path / "whole" / "episodes.csv").read_text()
 
     calls = {"n": 0}
-    real_run_job = sweep.run_job
+    real_run_job = engine.run_job
 
     def crash_after_two(job):
         calls["n"] += 1
@@ -263,14 +272,14 @@ def test_resume_after_interruption_gives_same_csv(runs, tmp_path, monkeypatch):
             raise KeyboardInterrupt
         return real_run_job(job)
 
-    monkeypatch.setattr(sweep, "run_job", crash_after_two)
+    monkeypatch.setattr(engine, "run_job", crash_after_two)
     with pytest.raises(KeyboardInterrupt, match="2 of the sweep's 8 cells are finished"):
         sweep.sweep(sweep_args(runs, tmp_path / "resumed"))
     assert len(list((tmp_path / "resumed" / "cells").glob("*.csv"))) == 2  # one job is one (checkpoint, γ) cell
     assert not (tmp_path / "resumed" / "episodes.csv").exists()
 
     evaluated = []
-    monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
+    monkeypatch.setattr(engine, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
     sweep.sweep(sweep_args(runs, tmp_path / "resumed"))
     assert len(evaluated) == 6  # only the cells not finished before the crash
     text = (tmp_path / "resumed" / "episodes.csv").read_text()
@@ -349,7 +358,7 @@ def test_bad_input_in_a_fresh_process_is_one_line_without_traceback(runs, tmp_pa
 
 def test_an_unwritable_output_is_refused_before_any_evaluation(runs, tmp_path, monkeypatch, capsys):
     evaluated = []
-    monkeypatch.setattr(sweep, "run_job", evaluated.append)
+    monkeypatch.setattr(engine, "run_job", evaluated.append)
     (tmp_path / "a_file").write_text("")
     outputs = [tmp_path / "a_file" / "out"]
     if os.geteuid() != 0:  # root writes into read-only directories
@@ -363,7 +372,7 @@ def test_an_unwritable_output_is_refused_before_any_evaluation(runs, tmp_path, m
 
 def test_a_second_sweep_on_one_output_is_refused(runs, tmp_path, monkeypatch, capsys):
     output = tmp_path / "out"
-    held = sweep.claim_output(output)  # another sweep, as far as the lock can tell: another open file
+    held = engine.claim_output(output)  # another sweep, as far as the lock can tell: another open file
     code, stderr = run_main(monkeypatch, capsys, [str(runs / "discrete"), "--output", str(output), "--episodes", "2"])
     assert code == 2 and len(stderr) == 1 and stderr[0].startswith(f"error: {output} is in use by another sweep")
     assert not list((output / "cells").iterdir())
@@ -388,9 +397,9 @@ def test_a_plain_tensor_file_is_skipped_without_a_warning(runs, tmp_path):
 
 
 def test_config_label_names_every_training_argument_that_differs(runs):
-    _, ckpt = sweep.read_checkpoint(checkpoint(runs, "discrete"))
+    _, ckpt = evaluation.read_checkpoint(checkpoint(runs, "discrete"))
     assert identity.config_label(ckpt) == "pgg_g1.1 total_timesteps=4096"  # not seed, checkpoint_interval, output_dir
-    _, other_lr = sweep.read_checkpoint(max((runs / "discrete_lr").rglob("step_*.pt")))
+    _, other_lr = evaluation.read_checkpoint(max((runs / "discrete_lr").rglob("step_*.pt")))
     assert identity.config_label(other_lr) == "pgg_g1.1 learning_rate=0.002 total_timesteps=4096"
     # An older checkpoint lacks arguments added since: they count as their defaults.
     old_args = {
@@ -411,7 +420,7 @@ def test_config_label_names_every_training_argument_that_differs(runs):
     )
     # MuJoCo tasks carry the simulator's version where the checkpoint records it; CartPole does not run on it.
     assert "mujoco" not in identity.config_label({**ckpt, "versions": {"mujoco": "2.3.7"}})
-    _, hopper = sweep.read_checkpoint(checkpoint(runs, "continuous"))
+    _, hopper = evaluation.read_checkpoint(checkpoint(runs, "continuous"))
     hopper_label = "pgg_g1.1 num_minibatches=8 num_steps=1024 total_timesteps=2048 update_epochs=2"
     assert identity.config_label({**hopper, "versions": {"mujoco": "3.1.6"}}) == hopper_label + " mujoco=3.1.6"
     # A format-1 checkpoint records no versions: never pooled with runs whose stack is known.
@@ -459,15 +468,15 @@ def test_summary_keeps_configurations_apart_and_reads_rows_without_config():
         {**base, "run": "b", "seed": 2, "episode": 0, "return": 20.0, "config": "ppo"},
         {**base, "run": "c", "seed": 1, "episode": 0, "return": 99.0, "config": "ppo learning_rate=0.002"},
     ]
-    summary = sweep.summarise(rows)
+    summary = engine.summary_rows(rows)
     assert [(r["config"], r["n_seeds"], r["mean"]) for r in summary] == [
         ("ppo", 2, 15.0),
         ("ppo learning_rate=0.002", 1, 99.0),
     ]
-    with pytest.raises(sweep.InputError, match="runs a and d would both count as seed 1"):
-        sweep.summarise([*rows, {**base, "run": "d", "seed": 1, "episode": 1, "return": 0.0}])
-    with pytest.raises(sweep.InputError, match="episode 0 of run a .* appears twice"):
-        sweep.summarise([*rows, rows[0]])
+    with pytest.raises(files.InputError, match="runs a and d would both count as seed 1"):
+        engine.summary_rows([*rows, {**base, "run": "d", "seed": 1, "episode": 1, "return": 0.0}])
+    with pytest.raises(files.InputError, match="episode 0 of run a .* appears twice"):
+        engine.summary_rows([*rows, rows[0]])
 
 
 # --- a cell is named by the bytes it evaluated ---------------------------------------------------------
@@ -479,24 +488,24 @@ def test_a_cell_is_named_by_the_bytes_it_evaluated(runs, tmp_path, monkeypatch):
     target = max((tmp_path / "runs").rglob("step_*.pt"))
     evaluated_bytes = target.read_bytes()
     replacement = max((runs / "discrete_lr").rglob("step_*.pt")).read_bytes()  # another run's weights
-    real_run_job = sweep.run_job
+    real_run_job = engine.run_job
 
     def rerun_rewrites_the_file_meanwhile(job):
         result = real_run_job(job)
         target.write_bytes(replacement)  # a rerun of the run name replaced it while the job ran
         return result
 
-    monkeypatch.setattr(sweep, "run_job", rerun_rewrites_the_file_meanwhile)
+    monkeypatch.setattr(engine, "run_job", rerun_rewrites_the_file_meanwhile)
     args = sweep_args(runs, tmp_path / "out", paths=(str(target),), gammas=(2.0,))
     sweep.sweep(args)
     digest = hashlib.sha1(evaluated_bytes).hexdigest()
-    settings = sweep.settings_of(args)
+    settings = engine.settings_of(args)
     evaluated_cell = cell_file(tmp_path / "out", target, 2.0, settings, digest)
     assert [p.name for p in (tmp_path / "out" / "cells").iterdir()] == [evaluated_cell.name]
     assert "learning_rate=0.002" not in evaluated_cell.read_text()
     # The file now holds other bytes: a rerun evaluates them, into a cell of their own.
     evaluated = []
-    monkeypatch.setattr(sweep, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
+    monkeypatch.setattr(engine, "run_job", lambda job: evaluated.append(job) or real_run_job(job))
     sweep.sweep(args)
     assert len(evaluated) == 1 and cell_file(tmp_path / "out", target, 2.0, settings).exists()
     assert "learning_rate=0.002" in (tmp_path / "out" / "episodes.csv").read_text()
@@ -507,14 +516,14 @@ def test_a_checkpoint_rewritten_during_its_sweep_is_reported_not_mixed(runs, tmp
     shutil.copytree(seed_1, tmp_path / "runs" / seed_1.name)
     target = max((tmp_path / "runs").rglob("step_*.pt"))
     replacement = max((runs / "discrete_lr").rglob("step_*.pt")).read_bytes()
-    real_run_job = sweep.run_job
+    real_run_job = engine.run_job
 
     def rewrite_after_the_first_cell(job):
         result = real_run_job(job)
         target.write_bytes(replacement)
         return result
 
-    monkeypatch.setattr(sweep, "run_job", rewrite_after_the_first_cell)
+    monkeypatch.setattr(engine, "run_job", rewrite_after_the_first_cell)
     seed_2 = max((runs / "discrete").rglob("step_*.pt"))
     out = sweep.sweep(sweep_args(runs, tmp_path / "out", paths=(str(target), str(seed_2))))
     assert len(list((out / "cells").iterdir())) == 4  # every cell kept, each named by what it evaluated
@@ -599,7 +608,7 @@ def test_stopping_the_pool_ends_its_manager_thread_before_returning():
     from concurrent.futures.process import _ExecutorManagerThread
 
     for _ in range(3):
-        pool, _, processes = start_pool(2, sweep.run_job, [])
+        pool, _, processes = start_pool(2, engine.run_job, [])
         stop_pool(pool, processes)
         assert not [t for t in threading.enumerate() if isinstance(t, _ExecutorManagerThread)]
         assert not any(process.is_alive() for process in processes.values())
@@ -622,7 +631,7 @@ def test_a_killed_sweep_leaves_no_worker_and_no_lock(long_sweep, tmp_path):
     assert survivors == []
     stderr = proc.stderr.read()
     assert "Traceback" not in stderr and "BrokenPipeError" not in stderr, stderr
-    sweep.claim_output(output).close()  # the lock died with its holder
+    engine.claim_output(output).close()  # the lock died with its holder
 
 
 # --- videos of the knob ----------------------------------------------------------------------------
@@ -644,10 +653,10 @@ def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     args = sweep.Args(paths=(str(path),), gammas=(1.0, 5.0), video=str(tmp_path / "videos"), video_episode=2)
     written = sweep.record_videos(args)
     assert [p.name for p in written] == ["gamma_1.mp4", "gamma_5.mp4", "side_by_side.mp4"]
-    agent, ckpt = sweep.load_any_checkpoint(path)
-    policy = sweep.GuidedPolicy(agent, ckpt)
+    agent, ckpt = evaluation.load_any_checkpoint(path)
+    policy = evaluation.GuidedPolicy(agent, ckpt)
     lengths = [
-        int(sweep.evaluate_cell(policy, ckpt, gamma, args.episodes, args.eval_seed, False)["length"][2])
+        int(evaluation.evaluate_cell(policy, ckpt, gamma, args.episodes, args.eval_seed, False)["length"][2])
         for gamma in (1.0, 5.0)
     ]
     assert [frame_count(p) for p in written] == [lengths[0] + 1, lengths[1] + 1, max(lengths) + 1]
@@ -692,7 +701,7 @@ def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
         rows = cells.read_cell(cell, args.episodes)
         cells.write_cell(cell, [{**row, "config": "pgg_g1.1 stale=1"} for row in rows])  # whole, checksums and all
     evaluated = []
-    monkeypatch.setattr(sweep, "run_job", evaluated.append)
+    monkeypatch.setattr(engine, "run_job", evaluated.append)
     sweep.sweep(args)
     assert evaluated == [] and read_csv(tmp_path / "out" / "episodes.csv") == fresh
 
@@ -710,7 +719,7 @@ def test_the_shipped_agents_load_and_sweep(table, tmp_path):
     assert files and shipped <= swept
     readme = (agents / "README.md").read_text()
     assert all(f"| {run} |" in readme for run, _ in shipped)
-    agent, ckpt = sweep.load_any_checkpoint(files[0])
+    agent, ckpt = evaluation.load_any_checkpoint(files[0])
     assert "resume" not in ckpt and ckpt["code"]["commit"]
     assert agent.null_obs.shape == (ckpt["obs_dim"],)
     output = sweep.sweep(sweep.Args(paths=(str(files[-1]),), gammas=(1.0, 1.1), episodes=2, output=str(tmp_path / "s")))

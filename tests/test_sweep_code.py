@@ -17,7 +17,7 @@ from conftest import ROOT
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_discrete
-from pgg_utils import episodes, files, scripts
+from pgg_utils import cells, episodes, evaluation, files, scripts, video
 
 FIXTURE = Path(__file__).resolve().parent / "fixtures" / "cartpole_format2" / "checkpoints" / "step_000000512.pt"
 LOOP_LINE = "actions = policy.act(obs, guidance, noise[t], deterministic)"
@@ -29,12 +29,17 @@ def sweep_args(output: Path, **overrides) -> sweep.Args:
 
 
 def sweep_copy(tmp_path, name: str, old: str, new: str):
-    """A copy of eval_gamma_sweep.py with `old` replaced by `new`, imported as its own module (as
-    `python name.py` would run it, with this repository's pgg_utils)."""
-    source = (ROOT / "eval_gamma_sweep.py").read_text()
-    assert source.count(old) == 1, f"the sweep no longer holds {old!r}"
+    """A copy of eval_gamma_sweep.py holding its own episode loop, as its docstring's "Changing the episodes" says:
+    pgg_utils.evaluation's evaluate_cell copied in below the imports (with `from pgg_utils.evaluation import *`),
+    `old` replaced by `new` in it; imported as its own module (as `python name.py` would run it, with this
+    repository's pgg_utils)."""
+    source, loop = (ROOT / "eval_gamma_sweep.py").read_text(), inspect.getsource(evaluation.evaluate_cell)
+    assert loop.count(old) == 1, f"the episode loop no longer holds {old!r}"
+    below_imports = "\n\n@dataclass\nclass Args"
+    assert source.count(below_imports) == 1
+    own_loop = "\nfrom pgg_utils.evaluation import *  # noqa: F403\n\n\n" + loop.replace(old, new)
     path = tmp_path / f"{name}.py"
-    path.write_text(source.replace(old, new))
+    path.write_text(source.replace(below_imports, own_loop + below_imports))
     spec = importlib.util.spec_from_file_location(name, path)
     module = importlib.util.module_from_spec(spec)
     sys.modules[name] = module  # dataclasses resolve their fields' module through sys.modules
@@ -71,14 +76,14 @@ def test_a_per_episode_column_added_in_a_sweep_copy_reaches_episodes_csv(tmp_pat
                            RETURN_LINE.replace("}", ', "final_position": obs[:, 0].astype(np.float64)}'))  # fmt: skip
     output = measuring.sweep(sweep_args(tmp_path / "out"))
     rows = files.read_csv(output / "episodes.csv")
-    assert list(rows[0]) == [*sweep.EPISODE_COLUMNS, "final_position"] and len(rows) == 12
+    assert list(rows[0]) == [*cells.EPISODE_COLUMNS, "final_position"] and len(rows) == 12
     positions = [float(r["final_position"]) for r in rows]  # the cart's position when its episode ended
     assert all(np.isfinite(positions)) and len(set(positions)) > 1
     assert len(episodes.read_episodes([output])) == 12  # the one reader of episodes.csv takes it, column and all
     measuring.sweep(sweep_args(tmp_path / "out"))  # its cells, whole with their added column, are reused
     assert "2 already done" in capsys.readouterr().err
     sweep.sweep(sweep_args(tmp_path / "out"))
-    assert list(files.read_csv(output / "episodes.csv")[0]) == sweep.EPISODE_COLUMNS
+    assert list(files.read_csv(output / "episodes.csv")[0]) == cells.EPISODE_COLUMNS
 
 
 def test_a_per_episode_column_with_a_name_of_the_sweeps_is_refused_in_one_line(tmp_path):
@@ -157,9 +162,9 @@ def test_video_makes_its_env_with_the_scripts_make_env(monkeypatch):
         return lambda: gym.make(env_id, render_mode=render_mode)
 
     monkeypatch.setattr(ppo_pgg_discrete, "make_env", make_env)
-    agent, ckpt = sweep.load_any_checkpoint(FIXTURE)
-    policy = sweep.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
-    frames, total, _ = sweep.record_episode(policy, ckpt, 1.0, 3, 10_000, 1, True)
+    agent, ckpt = evaluation.load_any_checkpoint(FIXTURE)
+    policy = evaluation.GuidedPolicy(agent, ckpt, module=ppo_pgg_discrete)
+    frames, total, _ = video.record_episode(policy, ckpt, 1.0, 3, 10_000, 1, True)
     assert made == [None, "rgb_array", None] and len(frames) == total + 1 and frames[0].ndim == 3
 
 
@@ -200,7 +205,7 @@ def test_a_recorded_return_is_the_summed_one_to_the_last_bit(tmp_path):
     recorded = files.read_csv(sweep.sweep(replace(args, output=str(tmp_path / "recorded"), script=(str(fork),))) /
                               "episodes.csv")  # fmt: skip
     assert [r["return"] for r in recorded] == [r["return"] for r in summed]
-    assert sweep.records_episodes(
+    assert evaluation.records_episodes(
         scripts.load_module(fork).make_env("Hopper-v4")()
     )  # the fork's path is the recorder's
     assert all(float(r["return"]) != int(float(r["return"])) for r in summed)  # fractional: float sums, not counts

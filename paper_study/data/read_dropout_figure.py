@@ -32,8 +32,8 @@ from scipy import stats
 
 from paper_study.agreement import step_label
 from paper_study.stats import holm
-from paper_study.summary import read_episodes, read_provenance, summarise, table_csv
-from pgg_utils.episodes import select_mode
+from paper_study.summary import read_provenance, summarise, table_csv, table_kinds
+from pgg_utils.episodes import read_episodes, select_mode
 from pgg_utils.files import InputError, write_atomic
 
 FIGURE_SIZE = (2586, 1319)  # the calibration below holds for this rendering of the figure only
@@ -106,7 +106,7 @@ def read_markers(pixels: np.ndarray) -> list[dict]:
 def our_summary(episodes: tuple[Path, ...], provenance: Path | None) -> list[dict]:
     """The tables' summary (paper_study.summary: statistics over seeds per cell) of our sweeps, sampled actions, learned null."""
     try:
-        rows = select_mode(read_episodes([str(p) for p in episodes]), "sample", "learned")
+        rows = select_mode(read_episodes([str(p) for p in episodes], check=table_kinds), "sample", "learned")
         return summarise(rows, read_provenance(str(provenance) if provenance else None))
     except InputError as e:
         sys.exit(f"error: {e}")
@@ -148,7 +148,8 @@ def comparison_table(readings: list[dict], summary: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def seed_means(row: dict) -> dict[int, float]:
+def by_seed(row: dict) -> dict[int, float]:
+    """{seed: its mean return} of a summary row (paper_study.summary.summarise), as the row writes it (4 places)."""
     return dict(zip(row["seeds"], (float(m) for m in row["seed_means"].split(";")), strict=True))
 
 
@@ -168,10 +169,10 @@ def effects_table(readings: list[dict], summary: list[dict], paper_ppo: dict, st
         for ppo in [
             r for r in summary if (r["env_id"], r["variant"], r["step"], r["eval_guidance"]) == (env, "ppo", step, 1.0)
         ]:
-            p = stats.ttest_ind(list(seed_means(at_1).values()), list(seed_means(ppo).values()), equal_var=False).pvalue
+            p = stats.ttest_ind(list(by_seed(at_1).values()), list(by_seed(ppo).values()), equal_var=False).pvalue
             row["welch"].append((ppo, p))
         if at_12 is not None:
-            before, after = seed_means(at_1), seed_means(at_12)
+            before, after = by_seed(at_1), by_seed(at_12)
             if set(before) != set(after):
                 sys.exit(
                     f"error: {env} at {step}: γ 1 and 1.2 have different seeds ({sorted(before)} vs {sorted(after)})"
