@@ -1,6 +1,7 @@
 """What several test modules share: the path to the scripts, one-thread torch, and the helpers that
 train a tiny run and run a script as a user would."""
 
+import os
 import signal
 import subprocess
 import sys
@@ -44,10 +45,14 @@ def train(module, args) -> Path:
 
 
 def run_script(script: str, *flags, **kwargs) -> subprocess.CompletedProcess:
-    """Runs one of the repository's scripts (e.g. "ppo_pgg_discrete.py") as a command."""
-    return subprocess.run(
-        [sys.executable, str(ROOT / script), *flags], capture_output=True, text=True, timeout=300, **kwargs
-    )
+    """Runs one of the repository's scripts as a user would: a top-level one by its path ("ppo_pgg_discrete.py"), a
+    tool of a package as a module ("beyond/command_tracking.py": `python -m beyond.command_tracking`)."""
+    path = Path(script)
+    command = [str(ROOT / script)]
+    if len(path.parts) > 1:
+        command = ["-m", ".".join(path.with_suffix("").parts)]
+        kwargs["env"] = {**kwargs.get("env", os.environ), "PYTHONPATH": str(ROOT)}
+    return subprocess.run([sys.executable, *command, *flags], capture_output=True, text=True, timeout=300, **kwargs)
 
 
 def default_sigint() -> None:

@@ -173,7 +173,7 @@ def test_the_cli_writes_every_episode_sorted(command_run, tmp_path):
         rows = list(reader)
     assert reader.fieldnames == command_tracking.COLUMNS and len(rows) == 2 * 2
     assert [(r["command"], r["episode"]) for r in rows] == [("0.0", "0"), ("0.0", "1"), ("2.5", "0"), ("2.5", "1")]
-    assert cheetah_velocity.__file__.endswith("cheetah_velocity.py") and rows[0]["task_sha1"]
+    assert cheetah_velocity.__file__.endswith("cheetah_velocity/__init__.py") and rows[0]["task_sha1"]
 
 
 def test_the_launcher_sweeps_what_the_issue_asks_and_its_grid_passes_the_launchers_checks():
