@@ -563,7 +563,7 @@ def test_compile_flag_trains_through_the_compiled_loss(kind, tmp_path, compiled_
         ("discrete", ["--cond-dropout", "1.5"], "--cond-dropout"),
         ("discrete", ["--checkpoint-interval", "0"], "--checkpoint-interval"),
         ("discrete", ["--output-dir", "/proc/forbidden"], "cannot write the run directory"),
-        pytest.param("discrete", ["--compile"], "--compile needs a C++ compiler", marks=pytest.mark.slow),  # no compiler on PATH
+        pytest.param("discrete", ["--compile"], "--compile needs a C++ compiler", marks=pytest.mark.slow),  # no CXX
         ("continuous", ["--env-id", "CartPole-v1"], "Discrete action space"),
         ("continuous", ["--env-id", "Nope-v4"], "cannot make environment"),
         ("continuous", ["--guidance", "inf"], "--guidance"),
