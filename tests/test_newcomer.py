@@ -16,14 +16,15 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, one_line_error, run_script
+from conftest import ROOT, one_line_error, run_main, run_script
 from test_plots import episode_rows, run_cli, write_episodes
 
 import eval_gamma_sweep as sweep
 import plot_results
+import ppo_pgg_continuous
 import ppo_pgg_discrete
 import reproduce
-from pgg_utils import checkpoints, checks, files
+from pgg_utils import bc_null, checkpoints, checks, files
 from pgg_utils.files import lock_directory
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -220,7 +221,9 @@ def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
             tmp_path / "sweep" / "episodes.csv", episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [1.0, 2.0]})
         )
         flags[0] = str(tmp_path / "sweep")
-    line = one_line_error(run_script(script, *flags))
+    module = {"ppo_pgg_discrete.py": ppo_pgg_discrete, "eval_gamma_sweep.py": sweep, "plot_results.py": plot_results,
+              "reproduce.py": reproduce}[script]  # fmt: skip
+    line = one_line_error(run_main(module, *flags))
     assert str(taken) in line, line
 
 
@@ -230,7 +233,7 @@ def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
 @pytest.mark.slow
 @pytest.mark.skipif(shutil.which("srun") is not None, reason="Slurm is installed here")
 def test_slurm_without_slurm_is_one_line_before_anything_is_trained(tmp_path):
-    done = run_script("reproduce.py", *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
+    done = run_main(reproduce, *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
     assert "--executor slurm needs Slurm (srun and sbatch on PATH)" in one_line_error(done)
     assert not (tmp_path / "runs").exists()
 
@@ -258,11 +261,12 @@ def test_a_file_of_python_objects_is_refused_without_torchs_advice_to_unpickle_i
     foreign = tmp_path / "run" / "checkpoints" / "step_000000512.pt"
     foreign.parent.mkdir(parents=True)
     torch.save({"model": argparse.Namespace()}, foreign)
-    done = run_script("eval_gamma_sweep.py", str(foreign), "--video", str(tmp_path / "videos"))
+    done = run_main(sweep, str(foreign), "--video", str(tmp_path / "videos"))
     line = one_line_error(done)
     assert "not a PGG checkpoint (it holds Python objects" in line and "weights_only" not in line, line
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(ctypes.util.find_library("OSMesa") is not None, reason="OSMesa is installed here")
 def test_osmesa_without_its_library_names_the_package(tmp_path):
     env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
@@ -348,20 +352,18 @@ def test_new_checkpoints_record_no_folder_of_the_machine_that_trained_them(tmp_p
 )
 def test_a_script_path_that_is_not_a_python_file_is_named_for_what_it_is(make, what, tmp_path):
     given = make(tmp_path / "fork")
-    for command in (
-        ["eval_gamma_sweep.py", str(FORMAT_2), "--output", str(tmp_path / "sweep")],
-        ["-m", "pgg_utils.bc_null", str(FORMAT_2), "--output", str(tmp_path / "bc")],
+    for module, flags in (
+        (sweep, [str(FORMAT_2), "--output", str(tmp_path / "sweep")]),
+        (bc_null, [str(FORMAT_2), "--output", str(tmp_path / "bc")]),
     ):
-        proc = subprocess.run([sys.executable, *command, "--script", str(given)], capture_output=True, text=True,
-                              cwd=ROOT, timeout=120, check=False)  # fmt: skip
-        line = one_line_error(proc)
+        line = one_line_error(run_main(module, *flags, "--script", str(given), cwd=ROOT))
         assert f"--script {given}" in line and what in line, line
     assert not (tmp_path / "sweep").exists() and not (tmp_path / "bc").exists()
 
 
 def bc_null_cli(*flags) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pgg_utils.bc_null", *flags], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120, check=False)  # fmt: skip
+    """`python -m pgg_utils.bc_null *flags`, its main in this process (conftest.run_main)."""
+    return run_main(bc_null, *flags, cwd=ROOT)
 
 
 @pytest.mark.slow
@@ -390,13 +392,13 @@ def test_bc_null_exits_2_with_the_reason_where_it_would_write_nothing(tmp_path):
     ],
 )
 def test_cleanrls_habitual_flags_are_answered_in_one_line(flag, answer, tmp_path):
-    line = one_line_error(run_script("ppo_pgg_discrete.py", flag, "--output-dir", str(tmp_path)))
+    line = one_line_error(run_main(ppo_pgg_discrete, flag, "--output-dir", str(tmp_path)))
     assert answer in line and line.startswith(f"error: {flag.split('=')[0]}")
     assert not any(tmp_path.iterdir())
 
 
 def test_cleanrls_flags_whose_meaning_holds_are_accepted_with_a_note():
-    proc = run_script("ppo_pgg_continuous.py", "--no_cuda", "--save-model", "--help")
+    proc = run_main(ppo_pgg_continuous, "--no_cuda", "--save-model", "--help")
     assert proc.returncode == 0 and "--discount" in proc.stdout
     assert "note: --no_cuda: these scripts train on the CPU only" in proc.stderr and "note: --save-model" in proc.stderr
 
@@ -448,6 +450,7 @@ def test_a_task_whose_rng_is_a_legacy_random_state_is_saved_and_restored(tmp_pat
     assert checkpoints.checkpoint_path(run_dir, 1536).exists()
 
 
+@pytest.mark.slow
 def test_shipped_agents_name_no_folder_of_the_machine_that_trained_them():
     """Every committed agent records its output folder relative to its run and its run's name
     (benchmarks/relocate_agents.py rewrote those two fields, every tensor unchanged); before, each held
