@@ -207,7 +207,6 @@ def test_a_full_disk_is_exit_1_naming_the_file_in_every_script(tmp_path, monkeyp
     )
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py", "reproduce.py"])
 def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
     taken = tmp_path / "taken"
@@ -230,7 +229,6 @@ def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
 # --- 7. one line of error where the scripts write the error ----------------------------------------------
 
 
-@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("srun") is not None, reason="Slurm is installed here")
 def test_slurm_without_slurm_is_one_line_before_anything_is_trained(tmp_path):
     done = run_main(reproduce, *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
@@ -341,7 +339,6 @@ def test_new_checkpoints_record_no_folder_of_the_machine_that_trained_them(tmp_p
     assert str(tmp_path.resolve()) not in (run_dir / "args.json").read_text()
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     "make,what",
     [
@@ -366,7 +363,6 @@ def bc_null_cli(*flags) -> subprocess.CompletedProcess:
     return run_main(bc_null, *flags, cwd=ROOT)
 
 
-@pytest.mark.slow
 def test_bc_null_exits_2_with_the_reason_where_it_would_write_nothing(tmp_path):
     assert "no run directories, roots or checkpoint files given" in one_line_error(bc_null_cli())
     assert "--episode-seed must be a non-negative integer" in one_line_error(
