@@ -634,6 +634,7 @@ def frame_count(path: Path) -> int:
     return sum(1 for _ in iio.imiter(path))
 
 
+@pytest.mark.slow
 def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     """One video per γ of episode k (its reset seed and noise, as in a sweep cell), each frame of it,
     and a side-by-side video as long as the longest. The recorded episode is the sweep cell's episode k:
@@ -654,6 +655,7 @@ def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     assert not list((tmp_path / "videos").glob(".*tmp*"))
 
 
+@pytest.mark.slow
 def test_video_of_several_checkpoints_is_one_line_of_error(runs, tmp_path):
     proc = subprocess.run(
         [*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")],
