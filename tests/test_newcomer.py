@@ -131,13 +131,12 @@ QUICK = ["--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--ch
          "--gammas", "1", "--episodes", "2", "--workers", "1"]  # fmt: skip
 
 
-@pytest.mark.slow
 def test_a_second_launcher_on_a_root_in_use_is_refused_in_one_line(tmp_path):
     root = tmp_path / "runs"
     root.mkdir()
     first = lock_directory(root, "another reproduce.py")  # as the first launcher holds it, training
     try:
-        second = run_script("reproduce.py", *QUICK, "--root", str(root), "--results", str(tmp_path / "results"))
+        second = run_main(reproduce, *QUICK, "--root", str(root), "--results", str(tmp_path / "results"))
     finally:
         first.close()
     line = one_line_error(second)
