@@ -721,10 +721,10 @@ TINY = ["--total-timesteps", "512", "--num-envs", "1", "--num-steps", "128", "--
 @pytest.mark.slow
 def test_a_fork_and_each_value_of_its_new_argument_get_a_run_directory_of_their_own(tmp_path):
     script, output = fork(tmp_path / "elsewhere"), tmp_path / "runs"
-    for value in ("0.5", "0.7"):
-        proc = run_fork(script, *TINY, "--my-coef", value, "--output-dir", str(output))
+    for value in ("0.5", "0.7"):  # the fork imported as the sweep imports it, its main run in this process
+        proc = run_main(scripts.load_module(script), *TINY, "--my-coef", value, "--output-dir", str(output))
         assert proc.returncode == 0, proc.stderr[-2000:]
-    original = run_script("ppo_pgg_discrete.py", *TINY, "--output-dir", str(output))
+    original = run_main(ppo_pgg_discrete, *TINY, "--output-dir", str(output))
     assert original.returncode == 0, original.stderr[-2000:]
     assert sorted(p.name for p in output.iterdir()) == [
         "CartPole-v1__ppo_fork__g1__p0__my_coef0.5__s1",  # the script's file stem, as CleanRL's --exp-name
