@@ -1103,22 +1103,24 @@ def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
     assert group == {1.0: {2: 40.0, 10: 200.0}}
 
 
-@pytest.mark.slow
 def test_every_reader_of_episodes_refuses_a_cut_file(tmp_path):
     """A cell short of episodes (a cut file) is refused in one line by each reader: plot_results, the
     held-out γ, the comparison of two sweeps and the cloning pilot, which read it as whole before."""
-    from conftest import one_line_error, run_script
+    from conftest import one_line_error
+
+    from beyond import bc_train_pilot
+    from paper_study import compare_sweeps, heldout_gamma
 
     rows = episode_rows(SEED_MEANS)
     write_episodes(tmp_path / "cut" / "episodes.csv", rows[:-1])
     (tmp_path / "runs").mkdir()
     cut = str(tmp_path / "cut" / "episodes.csv")
-    for script, flags in [("plot_results.py", [cut, "--output", str(tmp_path / "o")]),
-                          ("paper_study/heldout_gamma.py", [cut, cut, "--output", str(tmp_path / "h")]),
-                          ("paper_study/compare_sweeps.py", [cut, cut]),
-                          ("beyond/bc_train_pilot.py", [str(tmp_path / "runs"), cut])]:  # fmt: skip
-        line = one_line_error(run_script(script, *flags))
-        assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (script, line)
+    for module, flags in [(plots, [cut, "--output", str(tmp_path / "o")]),
+                          (heldout_gamma, [cut, cut, "--output", str(tmp_path / "h")]),
+                          (compare_sweeps, [cut, cut]),
+                          (bc_train_pilot, [str(tmp_path / "runs"), cut])]:  # fmt: skip
+        line = one_line_error(run_main(module, *flags))  # each command's main, in this process
+        assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (module.__name__, line)
 
 
 # --- partial inputs, damaged events, two writers: refused or named, never drawn as whole -------------
