@@ -138,6 +138,7 @@ def test_guidance_flags_are_checked_in_one_line(tmp_path, flags, message):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module", [ppo_pgg_discrete, ppo_pgg_continuous], ids=["discrete", "continuous"])
 def test_a_new_gamma_value_compiles_nothing(module):
     """--compile: γ_train enters the compiled loss as a tensor, so a schedule over 10 values is one graph."""
@@ -583,6 +584,7 @@ def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_u
     assert not left_out and {label for _, _, label in curves} == series and len(series) == 3
 
 
+@pytest.mark.slow
 def test_an_edited_script_or_task_is_evaluated_again_never_read_from_the_cache(tmp_path, monkeypatch):
     fork = write_fork(tmp_path / "elsewhere", "ppo_pgg_continuous.py")  # a copy of the original, as edited in place
     train_script(fork, tmp_path, "run_s1", seed=1)

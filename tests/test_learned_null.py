@@ -28,6 +28,7 @@ def loaded(run):
     return agent, scripts.training_module(ckpt)[0].make_env(ckpt["env_id"])
 
 
+@pytest.mark.slow
 def test_a_command_null_is_found_at_the_command_its_embedding_stands_for(command_run):
     """A null on the command replaces the command's normalised value by the embedding's: π(a|s, ∅) is then exactly
     π(a|s, c) at the raw command c that normalises to it. Set to stand for 1.23 m/s, the tool finds 1.23 with a KL of

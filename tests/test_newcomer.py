@@ -97,6 +97,7 @@ def test_reproduce_on_a_task_outside_the_paper_ends_with_its_tables_and_agents(t
     assert "none of the swept envs (MountainCar-v0) is in the paper's tables" in err and "results in" in err
 
 
+@pytest.mark.slow
 def test_compare_paper_on_tasks_outside_the_paper_is_a_note_and_exit_0(tmp_path):
     target = tmp_path / "episodes.csv"  # not in the paper, and not a gymnasium task: its rows say how it acts
     write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}, action_space="discrete"))
@@ -423,6 +424,7 @@ class LegacyRandomTask(gym.Env):
         return self.observe(), float(action), False, False, {}
 
 
+@pytest.mark.slow
 def test_a_task_whose_rng_is_a_legacy_random_state_is_saved_and_restored(tmp_path):
     gym.register("LegacyRandomTask-v0", entry_point=LegacyRandomTask, max_episode_steps=20)
     run_dir = tiny_run(tmp_path, env_id="LegacyRandomTask-v0", run_name="legacy")

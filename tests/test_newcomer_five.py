@@ -169,6 +169,7 @@ def test_the_performance_profile_spans_the_scores_range(tmp_path):
 # --- loud --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_response_step_the_sweep_lacks_is_one_line_and_a_task_without_it_says_so_in_its_panel(tmp_path):
     """`--response-step 12345` raised an IndexError traceback in figures.seeds_label; a step that one task of the
     sweep holds and another does not crashed the same way."""
@@ -218,6 +219,7 @@ def test_a_folder_of_symlinks_to_run_directories_sweeps_as_the_runs_do(tmp_path)
     assert plots.run_args_files([tmp_path / "runs"]) == [tmp_path / "runs" / "run" / "args.json"]
 
 
+@pytest.mark.slow
 def test_resume_on_a_folder_holding_another_runs_checkpoint_names_the_checkpoint(tmp_path):
     """--resume where another run's checkpoint was copied in is refused (right), but the line blamed args.json
     ("args.json disagrees with the run's checkpoints: seed 1 (checkpoints: 2): restore it"), which is this run's."""

@@ -234,7 +234,7 @@ def test_a_run_directory_in_use_is_refused(tmp_path):
     run_dir.mkdir()
     lock = lock_directory(run_dir)
     try:
-        line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path), "--run-name", "busy"))
+        line = one_line_error(run_here("discrete", "--output-dir", str(tmp_path), "--run-name", "busy"))
         assert f"{run_dir} is in use by another process (pid {os.getpid()})" in line
     finally:
         lock.close()
@@ -295,6 +295,7 @@ def test_progress_is_a_live_bar_in_a_terminal_and_plain_lines_in_a_log(tmp_path,
     assert "training" in screen and "━" in screen and "4,096/4,096 steps" in screen and "SPS" in screen
 
 
+@pytest.mark.slow
 def test_capture_video_records_the_first_sub_envs_episodes(tmp_path):
     pytest.importorskip("moviepy", reason="--capture-video needs the [video] extra")
     pytest.importorskip("pygame", reason="CartPole renders with pygame (the [video] extra)")
@@ -522,6 +523,7 @@ def test_a_refused_resume_sets_nothing_aside(tmp_path):
     assert last.read_bytes() == b"not a checkpoint" and not list(run_dir.rglob("*.unreadable"))
 
 
+@pytest.mark.slow
 def test_resuming_with_capture_video_switched_on_still_ends_on_the_uninterrupted_runs_bits(tmp_path):
     """RecordVideo joins the first sub-env's wrapper chain; the saved wrapper state is matched by kind."""
     pytest.importorskip("moviepy", reason="--capture-video needs the [video] extra")

@@ -42,6 +42,7 @@ def expected_max_of_normals(k: int) -> float:
     return value
 
 
+@pytest.mark.slow
 def test_where_gamma_does_nothing_the_fresh_gain_is_zero_and_the_bias_is_the_expected_max_of_the_noise():
     rng = np.random.default_rng(0)
     steps = range(1000, 121_000, 1000)  # 120 groups
@@ -121,6 +122,7 @@ def test_overlapping_episode_seeds_are_refused_in_one_line(tmp_path):
     assert not Path(out).exists()
 
 
+@pytest.mark.slow
 def test_groups_the_fresh_sweep_lacks_are_reported_not_dropped(tmp_path):
     rng = np.random.default_rng(5)
 

@@ -110,6 +110,7 @@ def cell_texts(output: Path, gamma: float) -> dict[str, str]:
     return {p.name: p.read_text() for p in sorted((output / "cells").glob(f"*__g{gamma:g}__*.csv"))}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monkeypatch):
     """The same cell, swept alone, beside other γ values (two worker processes), and in a sweep that
@@ -699,6 +700,7 @@ def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
     assert evaluated == [] and read_csv(tmp_path / "out" / "episodes.csv") == fresh
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("table", ["discrete", "continuous"])
 def test_the_shipped_agents_load_and_sweep(table, tmp_path):
     """The agents folder of a table: pickle-free, without resume state, each one a (run, step) of the
