@@ -96,9 +96,14 @@ def test_a_one_seed_grid_after_a_two_seed_grid_leaves_only_its_own_agents(local_
 
 @pytest.mark.slow
 def test_quick_preset_through_submitit_local_executor(local_results, tmp_path):
-    assert reproduce.reproduce(tiny_args(tmp_path, "submitit", executor="submitit-local")) == 0
+    """One run of the local grid (seed 1 of PPO), trained and swept through submitit's local executor, gives the
+    local launcher's episodes of that run, row for row."""
+    args = tiny_args(tmp_path, "submitit", executor="submitit-local", seeds=1, variants=("ppo",))
+    assert reproduce.reproduce(args) == 0
     results = tmp_path / "submitit" / "results"
-    assert (results / "episodes.csv").read_text() == (local_results / "episodes.csv").read_text()
+    submitted, local = read_csv(results / "episodes.csv"), read_csv(local_results / "episodes.csv")
+    assert len(submitted) == 2 * 2 * 3  # checkpoints × γ × episodes
+    assert submitted == [row for row in local if row["run"] == "CartPole-v1__ppo__s1"]
     assert (results / "table_discrete.md").exists()
 
 
@@ -206,12 +211,12 @@ def test_submitit_local_executor_works_when_launched_as_a_command(tmp_path):
     """The jobs unpickle reproduce.TrainingTask, not __main__'s, and import it from anywhere: the command
     runs from a directory that does not hold reproduce.py."""
     command = [sys.executable, str(ROOT / "reproduce.py"), "--executor", "submitit-local", "--envs", "CartPole-v1",
-               "--seeds", "1", "--variants", "ppo", "--total-timesteps", "2048", "--checkpoint-interval", "1024",
+               "--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--checkpoint-interval", "512",
                "--episodes", "2", "--gammas", "1", "2", "--root", str(tmp_path / "grid"),
                "--results", str(tmp_path / "results")]  # fmt: skip
     done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert (tmp_path / "grid" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000002048.pt").exists()
+    assert (tmp_path / "grid" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000001024.pt").exists()
     assert len((tmp_path / "results" / "episodes.csv").read_text().splitlines()) - 1 == 2 * 2 * 2
     assert (tmp_path / "results" / "table_discrete.md").exists()
 
