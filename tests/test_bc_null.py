@@ -39,6 +39,7 @@ def test_the_fit_moves_only_the_null_embedding_to_the_actions_maximum_likelihood
         np.testing.assert_allclose(torch.softmax(discrete.actor(null[None])[0], -1).numpy(), [0.6, 0.3, 0.1], atol=2e-3)
 
 
+@pytest.mark.slow
 def test_a_fitted_null_is_swept_as_its_own_configuration_beside_its_source(tmp_path):
     run_dir = train(ppo_pgg_discrete, small_args("discrete", tmp_path / "runs", guidance=1.1, cond_dropout=0.0))
     source = checkpoints.checkpoint_path(run_dir, 1536)

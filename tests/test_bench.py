@@ -136,6 +136,7 @@ def test_parity_rerun_trains_only_the_runs_not_saved(tmp_path, monkeypatch):
         compare_cleanrl.make_plan(args, folder, compare_cleanrl.saved_total(folder))
 
 
+@pytest.mark.slow
 def test_parity_without_cleanrl_python_is_one_line_of_error(tmp_path):
     (tmp_path / "ppo.py").write_text("")
     out = subprocess.run(

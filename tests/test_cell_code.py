@@ -85,6 +85,7 @@ def write_task_package(root: Path, style: str, scale: float) -> None:
     gym.registry.pop("pk/Grid-v0", None)
 
 
+@pytest.mark.slow
 def test_an_edited_module_of_a_tasks_package_evaluates_the_cells_again(tmp_path, monkeypatch, capsys):
     """Issue 56, silent 5: a custom task kept in a package (`--env-id pk.tasks:pk/Grid-v0`) whose reward scale
     comes from pk/helpers.py; the helper edited (x100), the next sweep into the same --output evaluates the cell
@@ -127,6 +128,7 @@ def test_a_sweeps_code_lists_no_installed_or_standard_library_file(tmp_path, mon
     assert not [path for path in listed if any(path.is_relative_to(folder) for folder in installed_folders())]
 
 
+@pytest.mark.slow
 def test_an_installed_copy_reads_its_own_files_and_none_of_the_packages_beside_it(tmp_path):
     """Issue 59, silent 1: the project installed in a site-packages folder, an installed package (tyro) beside it
     as in any environment. Its sweep's code is the copy's own files, the same ones as the clone's (so the same

@@ -9,7 +9,7 @@ from dataclasses import replace
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
+from conftest import ROOT, SCRIPTS, one_line_error, run_main, run_script, small_args, train
 
 import reproduce
 from beyond import command_tracking
@@ -143,7 +143,6 @@ def test_tracking_replays_each_episode_as_the_agent_acts_alone(command_run, tmp_
     assert {r["in_training_range"] for r in again} == {"YES", "no"}
 
 
-@pytest.mark.slow
 def test_tracking_skips_another_tasks_checkpoint_and_refuses_bad_settings_in_one_line(tmp_path):
     """A checkpoint of another task is named and left out (no rows); with nothing left, an error line, exit 2, no
     file; a repeated γ or a zero episode count is one line, exit 2."""
@@ -153,12 +152,12 @@ def test_tracking_skips_another_tasks_checkpoint_and_refuses_bad_settings_in_one
     checkpoint = checkpoints.checkpoints_of(other)[-1]
     rows, skipped = command_tracking.evaluate_checkpoint(checkpoint, tracking_args(tmp_path, [checkpoint]))
     assert rows == [] and "Humanoid-v4 is not the command task" in skipped
-    tool = "beyond/command_tracking.py"
-    proc = run_script(tool, str(other), "--output", str(tmp_path / "x.csv"), "--episodes", "1")
+    tool = command_tracking  # its main in this process (test_the_cli_writes_every_episode_sorted runs the command)
+    proc = run_main(tool, str(other), "--output", str(tmp_path / "x.csv"), "--episodes", "1")
     assert proc.returncode == 2 and "Traceback" not in proc.stderr and not (tmp_path / "x.csv").exists()
     assert "not the command task" in proc.stderr and "error: no checkpoint of the command task" in proc.stderr
     for flags, message in ((["--gammas", "1", "1"], "--gammas needs distinct"), (["--episodes", "0"], "positive")):
-        proc = run_script(tool, str(other), "--output", str(tmp_path / "x.csv"), *flags)
+        proc = run_main(tool, str(other), "--output", str(tmp_path / "x.csv"), *flags)
         assert message in one_line_error(proc)
 
 

@@ -388,6 +388,7 @@ def test_the_learned_nulls_are_tabled_with_and_without_dropout(tmp_path):
     assert "| 0.075 m from the centre |" in text  # no bar of a norm inside a table's cell
 
 
+@pytest.mark.slow
 def test_the_figure_draws_four_variants_per_band_and_on_reacher(tmp_path, monkeypatch):
     """A panel per band (5) and Reacher's, each with its four variants; the section links it."""
     drawn = []
@@ -408,6 +409,7 @@ def test_the_figure_draws_four_variants_per_band_and_on_reacher(tmp_path, monkey
     assert all(len(v) == 4 for v in panels.values())
 
 
+@pytest.mark.slow
 def test_the_report_writes_the_section_and_its_figure_from_the_folder(tmp_path):
     """beyond_report.report reads the dropout sets from the folder it is given: the section follows the command
     task's, the figure is written and listed, report_values.csv holds the section's numbers."""

@@ -231,6 +231,7 @@ def test_checkpoints_round_trip_under_weights_only(tmp_path):
     assert not list(run_dir.rglob("*.tmp"))
 
 
+@pytest.mark.slow
 def test_same_seed_same_result(tmp_path):
     args = tiny_args(tmp_path, cond_dropout=0.1, guidance=1.1)
     a = torch.load(checkpoints.checkpoint_path(run(args), 2048), weights_only=True)["model"]

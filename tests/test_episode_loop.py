@@ -18,6 +18,7 @@ from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV_ID
 from pgg_utils import bc_null, evaluation, files, spaces
 
 
+@pytest.mark.slow
 def test_the_video_of_a_sweep_copy_films_its_own_cell_episode_with_its_return(tmp_path, capsys):
     """Issue 56, silent 4: a copy of the sweep that transforms the observation in evaluate_cell gives episode 1 a
     return; its --video-episode 1 films that episode and prints that return (it filmed the original's episode,

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 import torch
 import torch._dynamo.testing
-from conftest import ROOT, SCRIPTS, one_line_error, run_script, small_args, train
+from conftest import ROOT, SCRIPTS, one_line_error, run_main, small_args, train
 from torch import nn
 
 import eval_gamma_sweep as sweep
@@ -134,11 +134,12 @@ def test_an_adaptive_run_logs_the_gamma_its_rule_chose(tmp_path):
     ],
 )
 def test_guidance_flags_are_checked_in_one_line(tmp_path, flags, message):
-    proc = run_script("ppo_pgg_discrete.py", "--output-dir", str(tmp_path), "--total-timesteps", "512", *flags)
+    proc = run_main(ppo_pgg_discrete, "--output-dir", str(tmp_path), "--total-timesteps", "512", *flags)
     assert message in one_line_error(proc)
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("module", [ppo_pgg_discrete, ppo_pgg_continuous], ids=["discrete", "continuous"])
 def test_a_new_gamma_value_compiles_nothing(module):
     """--compile: γ_train enters the compiled loss as a tensor, so a schedule over 10 values is one graph."""
@@ -254,8 +255,8 @@ def test_a_goal_null_embedding_replaces_only_the_goal_dimensions():
 
 
 def test_goal_dimensions_outside_the_observation_are_refused(tmp_path):
-    proc = run_script("ppo_pgg_continuous.py", "--env-id", "Reacher-v4", "--guidance", "1.1", "--null-dims", "4", "11",
-                      "--output-dir", str(tmp_path))  # fmt: skip
+    proc = run_main(ppo_pgg_continuous, "--env-id", "Reacher-v4", "--guidance", "1.1", "--null-dims", "4", "11",
+                    "--output-dir", str(tmp_path))  # fmt: skip
     assert one_line_error(proc) == "error: --null-dims must be observation indices of Reacher-v4, 0..10, got [4, 11]"
 
 
@@ -282,8 +283,8 @@ def test_act_from_a_loaded_agent_is_the_sweeps_policy(tmp_path):
 
 
 def test_a_linear_schedule_that_does_not_move_is_refused(tmp_path):
-    proc = run_script("ppo_pgg_discrete.py", "--output-dir", str(tmp_path), "--guidance-schedule", "linear",
-                      "--guidance-final", "1")  # fmt: skip
+    proc = run_main(ppo_pgg_discrete, "--output-dir", str(tmp_path), "--guidance-schedule", "linear",
+                    "--guidance-final", "1")  # fmt: skip
     assert "needs a --guidance-final other than --guidance (else: constant)" in one_line_error(proc)
 
 
@@ -529,6 +530,7 @@ def sweep_rows(tmp_path, name: str, *given: Path, **overrides) -> list[dict]:
     return files.read_csv(tmp_path / name / "episodes.csv")
 
 
+@pytest.mark.slow
 def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_original(tmp_path, capsys):
     fork = write_fork(tmp_path / "elsewhere")
     fork_run = train_script(fork, tmp_path, "fork_s1", seed=1)
@@ -563,6 +565,7 @@ def test_a_relu_fork_is_swept_with_its_own_agent_and_never_pooled_with_the_origi
         ppo_pgg_continuous.load_checkpoint(checkpoints.checkpoint_path(fork_run, 768))
 
 
+@pytest.mark.slow
 def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_under_guidance_one(tmp_path):
     fork = write_fork(tmp_path / "elsewhere")
     plain = {"guidance": 1.0, "cond_dropout": 0.0}
@@ -584,6 +587,7 @@ def test_a_forks_new_argument_splits_configurations_and_trains_the_null_branch_u
     assert not left_out and {label for _, _, label in curves} == series and len(series) == 3
 
 
+@pytest.mark.slow
 def test_an_edited_script_or_task_is_evaluated_again_never_read_from_the_cache(tmp_path, monkeypatch):
     fork = write_fork(tmp_path / "elsewhere", "ppo_pgg_continuous.py")  # a copy of the original, as edited in place
     train_script(fork, tmp_path, "run_s1", seed=1)
@@ -684,6 +688,7 @@ def test_training_the_sweep_and_act_work_in_a_copy_without_the_paper_study(tmp_p
     assert acted.strip() in ("0", "1")
 
 
+@pytest.mark.slow
 def test_a_script_copied_outside_the_repository_trains_with_the_installed_project_and_sweeps_with_itself(tmp_path):
     outside = tmp_path / "outside"
     outside.mkdir()

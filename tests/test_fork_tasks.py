@@ -231,6 +231,7 @@ def test_a_reward_scale_anywhere_in_make_env_trains_the_agent_but_never_changes_
     assert [float(row["return"]) for row in rows] == [float(row["length"]) for row in rows]
 
 
+@pytest.mark.slow
 def test_a_reward_scale_in_make_env_leaves_a_continuous_tasks_swept_returns_those_of_the_unscaled_script(tmp_path):
     """Pendulum's fractional returns: a checkpoint swept through the fork that scales its reward and through the
     original's make_env (a copy of the same file name) gives the same returns, to the bit."""

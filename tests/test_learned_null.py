@@ -7,7 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import torch
-from conftest import SCRIPTS, one_line_error, run_script, small_args, train
+from conftest import SCRIPTS, one_line_error, run_main, run_script, small_args, train
 
 from beyond import learned_null
 from paper_study.cheetah_velocity import COMMAND_INDEX, ENV_ID
@@ -28,6 +28,7 @@ def loaded(run):
     return agent, scripts.training_module(ckpt)[0].make_env(ckpt["env_id"])
 
 
+@pytest.mark.slow
 def test_a_command_null_is_found_at_the_command_its_embedding_stands_for(command_run):
     """A null on the command replaces the command's normalised value by the embedding's: π(a|s, ∅) is then exactly
     π(a|s, c) at the raw command c that normalises to it. Set to stand for 1.23 m/s, the tool finds 1.23 with a KL of
@@ -102,12 +103,12 @@ def test_the_cli_writes_a_row_per_checkpoint_and_refuses_bad_input_in_one_line(c
     other = train(
         SCRIPTS["continuous"], small_args("continuous", tmp_path, total_timesteps=256, checkpoint_interval=256)
     )
-    proc = run_script(tool, str(other), "--output", str(tmp_path / "x.csv"))
+    proc = run_main(learned_null, str(other), "--output", str(tmp_path / "x.csv"))  # the errors: main in this process
     assert (
         proc.returncode == 2 and "Traceback" not in proc.stderr and "Humanoid-v4 has no condition here" in proc.stderr
     )
     assert proc.stderr.strip().splitlines()[-1].startswith("error: no checkpoint of")
     assert not (tmp_path / "x.csv").exists()
     assert "--episodes must be positive" in one_line_error(
-        run_script(tool, str(other), "--episodes", "0", "--output", "y.csv")
+        run_main(learned_null, str(other), "--episodes", "0", "--output", "y.csv")
     )

@@ -4,13 +4,12 @@ first week, each a copied script that edits one path and not the others. Each tr
 now stops in one line naming the path, or, where the project owns the path (the normaliser), acts as it trains."""
 
 import subprocess
-import sys
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 import torch
-from conftest import ROOT, one_line_error
+from conftest import ROOT, one_line_error, run_main
 
 from pgg_utils import runs, scripts
 from pgg_utils.policy import randomised
@@ -31,8 +30,9 @@ def fork(tmp_path: Path, *edits: tuple[str, str]) -> Path:
 
 
 def train_fork(path: Path, tmp_path: Path, *flags: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, str(path), *PENDULUM, "--output-dir", str(tmp_path / "runs"), *flags],
-                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    """`python <fork> *flags`, the fork imported (scripts.load_module, as the sweep imports a fork) and its main run
+    in this process (conftest.run_main: no Python and torch start-up per fork)."""
+    return run_main(scripts.load_module(path), *PENDULUM, "--output-dir", str(tmp_path / "runs"), *flags)
 
 
 # The null branch with a learned σ of its own, mixed by natural parameters in guided_policy, but null_logstd (which

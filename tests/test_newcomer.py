@@ -16,14 +16,15 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, one_line_error, run_script
+from conftest import ROOT, one_line_error, run_main, run_script
 from test_plots import episode_rows, run_cli, write_episodes
 
 import eval_gamma_sweep as sweep
 import plot_results
+import ppo_pgg_continuous
 import ppo_pgg_discrete
 import reproduce
-from pgg_utils import checkpoints, checks, files
+from pgg_utils import bc_null, checkpoints, checks, files
 from pgg_utils.files import lock_directory
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -97,6 +98,7 @@ def test_reproduce_on_a_task_outside_the_paper_ends_with_its_tables_and_agents(t
     assert "none of the swept envs (MountainCar-v0) is in the paper's tables" in err and "results in" in err
 
 
+@pytest.mark.slow
 def test_compare_paper_on_tasks_outside_the_paper_is_a_note_and_exit_0(tmp_path):
     target = tmp_path / "episodes.csv"  # not in the paper, and not a gymnasium task: its rows say how it acts
     write_episodes(target, episode_rows({("MyEnv-v0", "ppo", 1000, 1.0): [1.0, 2.0]}, action_space="discrete"))
@@ -131,13 +133,12 @@ QUICK = ["--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--ch
          "--gammas", "1", "--episodes", "2", "--workers", "1"]  # fmt: skip
 
 
-@pytest.mark.slow
 def test_a_second_launcher_on_a_root_in_use_is_refused_in_one_line(tmp_path):
     root = tmp_path / "runs"
     root.mkdir()
     first = lock_directory(root, "another reproduce.py")  # as the first launcher holds it, training
     try:
-        second = run_script("reproduce.py", *QUICK, "--root", str(root), "--results", str(tmp_path / "results"))
+        second = run_main(reproduce, *QUICK, "--root", str(root), "--results", str(tmp_path / "results"))
     finally:
         first.close()
     line = one_line_error(second)
@@ -207,7 +208,6 @@ def test_a_full_disk_is_exit_1_naming_the_file_in_every_script(tmp_path, monkeyp
     )
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("script", ["ppo_pgg_discrete.py", "eval_gamma_sweep.py", "plot_results.py", "reproduce.py"])
 def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
     taken = tmp_path / "taken"
@@ -221,17 +221,18 @@ def test_an_output_folder_that_is_a_file_is_bad_input_exit_2(tmp_path, script):
             tmp_path / "sweep" / "episodes.csv", episode_rows({("CartPole-v1", "ppo", 1000, 1.0): [1.0, 2.0]})
         )
         flags[0] = str(tmp_path / "sweep")
-    line = one_line_error(run_script(script, *flags))
+    module = {"ppo_pgg_discrete.py": ppo_pgg_discrete, "eval_gamma_sweep.py": sweep, "plot_results.py": plot_results,
+              "reproduce.py": reproduce}[script]  # fmt: skip
+    line = one_line_error(run_main(module, *flags))
     assert str(taken) in line, line
 
 
 # --- 7. one line of error where the scripts write the error ----------------------------------------------
 
 
-@pytest.mark.slow
 @pytest.mark.skipif(shutil.which("srun") is not None, reason="Slurm is installed here")
 def test_slurm_without_slurm_is_one_line_before_anything_is_trained(tmp_path):
-    done = run_script("reproduce.py", *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
+    done = run_main(reproduce, *QUICK, "--executor", "slurm", "--root", str(tmp_path / "runs"))
     assert "--executor slurm needs Slurm (srun and sbatch on PATH)" in one_line_error(done)
     assert not (tmp_path / "runs").exists()
 
@@ -259,11 +260,12 @@ def test_a_file_of_python_objects_is_refused_without_torchs_advice_to_unpickle_i
     foreign = tmp_path / "run" / "checkpoints" / "step_000000512.pt"
     foreign.parent.mkdir(parents=True)
     torch.save({"model": argparse.Namespace()}, foreign)
-    done = run_script("eval_gamma_sweep.py", str(foreign), "--video", str(tmp_path / "videos"))
+    done = run_main(sweep, str(foreign), "--video", str(tmp_path / "videos"))
     line = one_line_error(done)
     assert "not a PGG checkpoint (it holds Python objects" in line and "weights_only" not in line, line
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(ctypes.util.find_library("OSMesa") is not None, reason="OSMesa is installed here")
 def test_osmesa_without_its_library_names_the_package(tmp_path):
     env = dict(os.environ, MUJOCO_GL="osmesa", PYOPENGL_PLATFORM="osmesa")
@@ -338,7 +340,6 @@ def test_new_checkpoints_record_no_folder_of_the_machine_that_trained_them(tmp_p
     assert str(tmp_path.resolve()) not in (run_dir / "args.json").read_text()
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     "make,what",
     [
@@ -349,23 +350,20 @@ def test_new_checkpoints_record_no_folder_of_the_machine_that_trained_them(tmp_p
 )
 def test_a_script_path_that_is_not_a_python_file_is_named_for_what_it_is(make, what, tmp_path):
     given = make(tmp_path / "fork")
-    for command in (
-        ["eval_gamma_sweep.py", str(FORMAT_2), "--output", str(tmp_path / "sweep")],
-        ["-m", "pgg_utils.bc_null", str(FORMAT_2), "--output", str(tmp_path / "bc")],
+    for module, flags in (
+        (sweep, [str(FORMAT_2), "--output", str(tmp_path / "sweep")]),
+        (bc_null, [str(FORMAT_2), "--output", str(tmp_path / "bc")]),
     ):
-        proc = subprocess.run([sys.executable, *command, "--script", str(given)], capture_output=True, text=True,
-                              cwd=ROOT, timeout=120, check=False)  # fmt: skip
-        line = one_line_error(proc)
+        line = one_line_error(run_main(module, *flags, "--script", str(given), cwd=ROOT))
         assert f"--script {given}" in line and what in line, line
     assert not (tmp_path / "sweep").exists() and not (tmp_path / "bc").exists()
 
 
 def bc_null_cli(*flags) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pgg_utils.bc_null", *flags], capture_output=True, text=True,
-                          cwd=ROOT, timeout=120, check=False)  # fmt: skip
+    """`python -m pgg_utils.bc_null *flags`, its main in this process (conftest.run_main)."""
+    return run_main(bc_null, *flags, cwd=ROOT)
 
 
-@pytest.mark.slow
 def test_bc_null_exits_2_with_the_reason_where_it_would_write_nothing(tmp_path):
     assert "no run directories, roots or checkpoint files given" in one_line_error(bc_null_cli())
     assert "--episode-seed must be a non-negative integer" in one_line_error(
@@ -391,13 +389,13 @@ def test_bc_null_exits_2_with_the_reason_where_it_would_write_nothing(tmp_path):
     ],
 )
 def test_cleanrls_habitual_flags_are_answered_in_one_line(flag, answer, tmp_path):
-    line = one_line_error(run_script("ppo_pgg_discrete.py", flag, "--output-dir", str(tmp_path)))
+    line = one_line_error(run_main(ppo_pgg_discrete, flag, "--output-dir", str(tmp_path)))
     assert answer in line and line.startswith(f"error: {flag.split('=')[0]}")
     assert not any(tmp_path.iterdir())
 
 
 def test_cleanrls_flags_whose_meaning_holds_are_accepted_with_a_note():
-    proc = run_script("ppo_pgg_continuous.py", "--no_cuda", "--save-model", "--help")
+    proc = run_main(ppo_pgg_continuous, "--no_cuda", "--save-model", "--help")
     assert proc.returncode == 0 and "--discount" in proc.stdout
     assert "note: --no_cuda: these scripts train on the CPU only" in proc.stderr and "note: --save-model" in proc.stderr
 
@@ -427,6 +425,7 @@ class LegacyRandomTask(gym.Env):
         return self.observe(), float(action), False, False, {}
 
 
+@pytest.mark.slow
 def test_a_task_whose_rng_is_a_legacy_random_state_is_saved_and_restored(tmp_path):
     gym.register("LegacyRandomTask-v0", entry_point=LegacyRandomTask, max_episode_steps=20)
     run_dir = tiny_run(tmp_path, env_id="LegacyRandomTask-v0", run_name="legacy")
@@ -449,6 +448,7 @@ def test_a_task_whose_rng_is_a_legacy_random_state_is_saved_and_restored(tmp_pat
     assert checkpoints.checkpoint_path(run_dir, 1536).exists()
 
 
+@pytest.mark.slow
 def test_shipped_agents_name_no_folder_of_the_machine_that_trained_them():
     """Every committed agent records its output folder relative to its run and its run's name
     (benchmarks/relocate_agents.py rewrote those two fields, every tensor unchanged); before, each held

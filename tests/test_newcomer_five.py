@@ -71,6 +71,7 @@ def test_act_names_noise_of_the_wrong_shape_and_the_shape_it_needs(kind):
 # --- silent: a configuration short of seeds in every cell -----------------------------------------
 
 
+@pytest.mark.slow
 def test_a_configuration_short_of_a_seed_in_every_cell_is_marked_against_the_others(tmp_path, capsys):
     """With no written.csv and one variant's seed 2 gone from every cell, the tables showed that variant's 2-seed
     cells bare under "mean ± 95% CI over seeds" beside the others' 3, and no note: only a cell short within its own
@@ -124,6 +125,7 @@ def test_a_rerun_never_deletes_a_file_named_in_outputs_txt_by_hand_or_edited_sin
 # --- silent: the aggregates on a user's own tasks ------------------------------------------------
 
 
+@pytest.mark.slow
 def test_aggregates_on_a_task_the_paper_did_not_run_normalise_by_the_sweeps_own_ppo(tmp_path, capsys):
     """LunarLander or Swimmer got no aggregate IQM and no performance profile, without a word: where the paper has
     no row, the sweep's own PPO at γ = 1 is the reference (0 at its first step, 1 at its last), and the table and
@@ -170,6 +172,7 @@ def test_the_performance_profile_spans_the_scores_range(tmp_path):
 # --- loud --------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_a_response_step_the_sweep_lacks_is_one_line_and_a_task_without_it_says_so_in_its_panel(tmp_path):
     """`--response-step 12345` raised an IndexError traceback in figures.seeds_label; a step that one task of the
     sweep holds and another does not crashed the same way."""
@@ -219,6 +222,7 @@ def test_a_folder_of_symlinks_to_run_directories_sweeps_as_the_runs_do(tmp_path)
     assert plots.run_args_files([tmp_path / "runs"]) == [tmp_path / "runs" / "run" / "args.json"]
 
 
+@pytest.mark.slow
 def test_resume_on_a_folder_holding_another_runs_checkpoint_names_the_checkpoint(tmp_path):
     """--resume where another run's checkpoint was copied in is refused (right), but the line blamed args.json
     ("args.json disagrees with the run's checkpoints: seed 1 (checkpoints: 2): restore it"), which is this run's."""

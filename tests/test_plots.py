@@ -11,7 +11,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 import pytest
-from conftest import ROOT
+from conftest import ROOT, run_main
 from scipy import stats
 
 import plot_results as plots
@@ -91,6 +91,16 @@ def sweep_dir(tmp_path):
     return tmp_path / "sweep"
 
 
+@pytest.fixture(scope="module")
+def generated(tmp_path_factory):
+    """One plot_results run on SEED_MEANS with the default arguments, which several tests read (and none
+    writes to): (the sweep folder, the output folder, the paths it wrote)."""
+    tmp_path = tmp_path_factory.mktemp("plots")
+    write_episodes(tmp_path / "sweep" / "episodes.csv", episode_rows(SEED_MEANS))
+    written = generate(tmp_path / "sweep", tmp_path)
+    return tmp_path / "sweep", tmp_path / "out", written
+
+
 def generate(sweep_dir, tmp_path, **kw):
     return plots.generate(plots.Args(sweeps=(str(sweep_dir),), output=str(tmp_path / "out"), **kw))
 
@@ -101,8 +111,9 @@ def summary_of(*paths, provenance=None):
 
 
 def run_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, str(ROOT / "plot_results.py"), *map(str, args)], capture_output=True, text=True,
-                          timeout=120, cwd=cwd, check=False)  # fmt: skip
+    """`python plot_results.py *args`, its main in this process (conftest.run_main: no Python start-up per call;
+    test_plot_results_imports_neither_torch_nor_the_training_scripts starts the real command)."""
+    return run_main(plots, *args, cwd=cwd)
 
 
 def one_error_line(proc, message: str) -> None:
@@ -115,22 +126,22 @@ def one_error_line(proc, message: str) -> None:
 # --- tables ---------------------------------------------------------------------------------------
 
 
-def test_tables_hold_expected_cells(sweep_dir, tmp_path):
-    generate(sweep_dir, tmp_path)
-    markdown = (tmp_path / "out" / "table_discrete.md").read_text().splitlines()
+def test_tables_hold_expected_cells(generated):
+    _, out, _ = generated
+    markdown = (out / "table_discrete.md").read_text().splitlines()
     assert markdown[2] == "| Method | Acrobot-v1 | CartPole-v1 |"
     section = markdown.index("| **100k Steps** | | |")
     assert markdown[section + 1] == f"| PPO | -200.0 ± {HALF_WIDTH:.1f} | 271.0 ± {HALF_WIDTH:.1f} |"
     assert markdown[section + 2] == "| pgg_g1.1 |  |  |"
     assert markdown[section + 4] == f"|   γ=2 | -93.0 ± {HALF_WIDTH:.1f} | 101.0 ± {HALF_WIDTH:.1f} |"
-    latex = (tmp_path / "out" / "table_discrete.tex").read_text()
+    latex = (out / "table_discrete.tex").read_text()
     assert f"\\quad $\\gamma=2$ & $-93.0 \\pm {HALF_WIDTH:.1f}$ & $101.0 \\pm {HALF_WIDTH:.1f}$ \\\\" in latex
     assert "\\multicolumn{3}{l}{\\textbf{200k Steps}} \\\\" in latex
 
 
-def test_latex_is_well_formed(sweep_dir, tmp_path):
-    generate(sweep_dir, tmp_path)
-    latex = (tmp_path / "out" / "table_discrete.tex").read_text()
+def test_latex_is_well_formed(generated):
+    _, out, _ = generated
+    latex = (out / "table_discrete.tex").read_text()
     begins, ends = re.findall(r"\\begin\{(\w+)\}", latex), re.findall(r"\\end\{(\w+)\}", latex)
     assert sorted(begins) == sorted(ends) == sorted(["document", "table", "tabular"])
     assert latex.count("{") == latex.count("}")
@@ -223,6 +234,7 @@ def test_median_relative_gap_resamples_seeds_per_run_set_with_the_references_fix
     assert 0.78 < bootstrap_coverage(5) < 0.90  # a 5-seed percentile interval is narrow: the report says so
 
 
+@pytest.mark.slow
 def test_comparison_tests_each_cell_and_corrects_over_the_table(sweep_dir, tmp_path):
     generate(sweep_dir, tmp_path, compare_paper=True)
     with open(tmp_path / "out" / "compare_paper.csv") as f:
@@ -287,6 +299,7 @@ def test_the_report_says_what_each_test_can_see_and_pools_a_task_with_a_bootstra
         assert gap in report
 
 
+@pytest.mark.slow
 def test_cleanrl_is_a_second_reference_for_final_ppo(tmp_path):
     means = {
         ("CartPole-v1", "ppo", 500000, 1.0): [489.0, 490.0, 491.0],
@@ -336,6 +349,7 @@ def test_compare_paper_compares_the_papers_configurations_only_and_names_the_res
 # --- configurations -------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_two_configs_are_never_pooled(tmp_path):
     cell = ("CartPole-v1", "ppo", 100000, 1.0)
     default = episode_rows({cell: [190.0]}, config="ppo")
@@ -411,6 +425,7 @@ def test_same_config_and_seed_from_two_runs_is_an_error_naming_both(tmp_path):
         plots.read_episodes([tmp_path / "a.csv", tmp_path / "copy.csv"])
 
 
+@pytest.mark.slow
 def test_configurations_are_grouped_on_their_exact_guidance(tmp_path):
     """γ_train 1.1 and 1.1000000001 share a variant and config label (both print as `pgg_g1.1`) and, with
     default run names, a run name per seed: still two configurations, neither pooled nor refused."""
@@ -425,6 +440,7 @@ def test_configurations_are_grouped_on_their_exact_guidance(tmp_path):
     assert "| pgg_g1.1 [guidance=1.1] |" in table and "| pgg_g1.1 [guidance=1.1000000001] |" in table
 
 
+@pytest.mark.slow
 def test_cells_from_another_mujoco_are_marked(tmp_path):
     hopper = {
         ("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0],
@@ -460,6 +476,7 @@ def test_cells_from_another_mujoco_are_marked(tmp_path):
 # --- what plot_results needs, where an env belongs, what a rerun leaves ----------------------------
 
 
+@pytest.mark.slow
 def test_plot_results_imports_neither_torch_nor_the_training_scripts():
     """Tables from committed CSVs, and a usage error, need no torch (seconds to import) and no training code."""
     code = ("import plot_results, sys; assert 'torch' not in sys.modules; "
@@ -470,6 +487,7 @@ def test_plot_results_imports_neither_torch_nor_the_training_scripts():
     assert proc.returncode == 0, proc.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("env,action_space", [("Pendulum-v1", None), ("Pendulum-v1", "continuous"),
                                               ("LunarLanderContinuous-v3", "continuous")])  # fmt: skip
 def test_an_env_is_tabled_by_its_action_space_not_its_name(tmp_path, env, action_space):
@@ -530,8 +548,8 @@ def legend_labels(fig) -> list[str]:
     return [t.get_text() for legend in fig.legends for t in legend.get_texts()]
 
 
-def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
-    written = generate(sweep_dir, tmp_path)
+def test_figures_use_paper_names_and_order(generated):
+    sweep_dir, _, written = generated
     summary = summary_of(sweep_dir)
     fig = figures.figure_for_variant(summary, ["Acrobot-v1", "CartPole-v1"], "pgg_g1.1")
     for ax in fig.axes:
@@ -555,6 +573,7 @@ def test_figures_use_paper_names_and_order(sweep_dir, tmp_path):
             assert 5_000 < path.stat().st_size < 5_000_000
 
 
+@pytest.mark.slow
 def test_figures_draw_the_tasks_swept_in_the_papers_order_and_no_task_never_run(tmp_path):
     means = {
         ("Hopper-v4", "ppo", 200000, 1.0): [1000.0, 1100.0, 1200.0],
@@ -717,12 +736,12 @@ def test_learning_curves_draw_few_points_and_say_so(sweep_dir, tmp_path):
 # --- summaries and controls -----------------------------------------------------------------------
 
 
-def test_aggregate_and_best_gamma(sweep_dir, tmp_path):
-    generate(sweep_dir, tmp_path)
-    best = read_csv(tmp_path / "out" / "best_gamma.csv")
+def test_aggregate_and_best_gamma(generated):
+    sweep_dir, out, _ = generated
+    best = read_csv(out / "best_gamma.csv")
     chosen = {(r["env_id"], r["variant"], r["step"]): float(r["best_eval_guidance"]) for r in best}
     assert chosen[("CartPole-v1", "pgg_g1.1", "100000")] == 1.0 and chosen[("Acrobot-v1", "pgg_g1.1", "100000")] == 2.0
-    aggregate = read_csv(tmp_path / "out" / "aggregate_iqm.csv")
+    aggregate = read_csv(out / "aggregate_iqm.csv")
     row = next(
         r for r in aggregate if r["variant"] == "pgg_g1.1" and r["step"] == "200000" and r["eval_guidance"] == "2.0"
     )
@@ -786,6 +805,7 @@ def test_the_performance_profile_agrees_with_rliables():
     assert np.abs(high - intervals["x"][1]).max() <= 1 / 30 + 1e-9
 
 
+@pytest.mark.slow
 def test_controls_table_puts_evaluation_modes_side_by_side(sweep_dir, tmp_path):
     with open(sweep_dir / "episodes.csv") as f:
         rows = [r for r in csv.DictReader(f) if r["env_id"] == "CartPole-v1" and r["step"] == "100000"]
@@ -1035,6 +1055,7 @@ def test_a_replot_into_the_same_folder_drops_the_last_plots_learning_curves(tmp_
     assert (out / "learning_curves.png").read_bytes() == b"committed, drawn from runs that are not committed"
 
 
+@pytest.mark.slow
 def test_checkpoint_marks_under_1k_or_between_thousands_are_labelled_exactly(tmp_path):
     """Marks of 512 and 2,048 steps were "0k" and "2k" (two marks could share a label); whole thousands
     and millions keep the paper's 100k and 1M."""
@@ -1052,6 +1073,7 @@ def test_checkpoint_marks_under_1k_or_between_thousands_are_labelled_exactly(tmp
 # --- one reader of episodes.csv --------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_the_paper_study_reads_episodes_without_plot_results(tmp_path):
     """The paper study's readers import pgg_utils.episodes (and paper_study.summary), not the top-level
     plot_results: each runs with plot_results made unimportable."""
@@ -1080,22 +1102,24 @@ def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
     assert group == {1.0: {2: 40.0, 10: 200.0}}
 
 
-@pytest.mark.slow
 def test_every_reader_of_episodes_refuses_a_cut_file(tmp_path):
     """A cell short of episodes (a cut file) is refused in one line by each reader: plot_results, the
     held-out γ, the comparison of two sweeps and the cloning pilot, which read it as whole before."""
-    from conftest import one_line_error, run_script
+    from conftest import one_line_error
+
+    from beyond import bc_train_pilot
+    from paper_study import compare_sweeps, heldout_gamma
 
     rows = episode_rows(SEED_MEANS)
     write_episodes(tmp_path / "cut" / "episodes.csv", rows[:-1])
     (tmp_path / "runs").mkdir()
     cut = str(tmp_path / "cut" / "episodes.csv")
-    for script, flags in [("plot_results.py", [cut, "--output", str(tmp_path / "o")]),
-                          ("paper_study/heldout_gamma.py", [cut, cut, "--output", str(tmp_path / "h")]),
-                          ("paper_study/compare_sweeps.py", [cut, cut]),
-                          ("beyond/bc_train_pilot.py", [str(tmp_path / "runs"), cut])]:  # fmt: skip
-        line = one_line_error(run_script(script, *flags))
-        assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (script, line)
+    for module, flags in [(plots, [cut, "--output", str(tmp_path / "o")]),
+                          (heldout_gamma, [cut, cut, "--output", str(tmp_path / "h")]),
+                          (compare_sweeps, [cut, cut]),
+                          (bc_train_pilot, [str(tmp_path / "runs"), cut])]:  # fmt: skip
+        line = one_line_error(run_main(module, *flags))  # each command's main, in this process
+        assert "1 cell(s) hold fewer episodes than the other cells' 2" in line, (module.__name__, line)
 
 
 # --- partial inputs, damaged events, two writers: refused or named, never drawn as whole -------------
@@ -1221,6 +1245,7 @@ def legend_labels_of_axes(fig) -> list[str]:
     return [t.get_text() for ax in fig.axes if ax.get_legend() for t in ax.get_legend().get_texts()]
 
 
+@pytest.mark.slow
 def test_long_panel_titles_are_broken_rather_than_overlap(tmp_path):
     """Side-by-side panels of long task names with their notes would overlap: their titles are broken
     onto two lines before the notes; a figure whose titles fit draws as before."""
@@ -1243,6 +1268,7 @@ def test_long_panel_titles_are_broken_rather_than_overlap(tmp_path):
     assert short.axes[0].get_title() == "HalfCheetah-v4 (3 seeds, MuJoCo 3.1.6)"
 
 
+@pytest.mark.slow
 def test_a_forks_runs_are_named_by_their_script_in_every_output_whatever_else_the_sweep_holds(tmp_path):
     """A sweep of a fork's runs alone: every table row, best_gamma and aggregate_iqm names the fork's script, as they
     do beside the original's runs (today's main labelled them "pgg_g1.1" and "PPO", the original's names); and two

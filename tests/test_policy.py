@@ -72,6 +72,7 @@ def replayed_actions(agent, raw: np.ndarray, guidance: float, noise: np.ndarray)
     return np.clip(actions, *agent.action_bounds)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("written_for", ["numpy", "torch"])
 def test_a_fork_that_mixes_sigma_per_branch_in_the_one_place_trains_and_acts_as_its_policy(tmp_path, written_for):
     fork = write_fork(tmp_path / "fork", "ppo_pgg_continuous.py", SIGMA_PARAMETER, SIGMA_OF_NULL,
@@ -185,6 +186,7 @@ def with_batch_norm(agent, network: str):
     return agent
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 @pytest.mark.parametrize("guidance", [1.0, 1.1])
 def test_an_actor_with_batch_norm_trains_with_and_without_guidance(kind, guidance, tmp_path, monkeypatch):

@@ -7,7 +7,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, one_line_error
+from conftest import ROOT, one_line_error, run_main
 
 import reproduce
 from beyond import sets as beyond_sets
@@ -51,6 +51,7 @@ def test_quick_preset_runs_end_to_end_locally(local_results):
         assert (local_results / name).exists(), name
 
 
+@pytest.mark.slow
 def test_the_agents_are_exported_without_resume_state_and_sweep_to_the_same_episodes(local_results, tmp_path):
     import torch
 
@@ -69,6 +70,7 @@ def test_the_agents_are_exported_without_resume_state_and_sweep_to_the_same_epis
     assert (swept / "episodes.csv").read_text() == (local_results / "episodes.csv").read_text()
 
 
+@pytest.mark.slow
 def test_a_one_seed_grid_after_a_two_seed_grid_leaves_only_its_own_agents(local_results, tmp_path):
     """`reproduce.py --preset quick --seeds 1` after the 2-seed preset left the seed-2 agents and their
     README rows beside the 1-seed tables: the agents folder holds the agents of the tables beside it, so
@@ -94,9 +96,14 @@ def test_a_one_seed_grid_after_a_two_seed_grid_leaves_only_its_own_agents(local_
 
 @pytest.mark.slow
 def test_quick_preset_through_submitit_local_executor(local_results, tmp_path):
-    assert reproduce.reproduce(tiny_args(tmp_path, "submitit", executor="submitit-local")) == 0
+    """One run of the local grid (seed 1 of PPO), trained and swept through submitit's local executor, gives the
+    local launcher's episodes of that run, row for row."""
+    args = tiny_args(tmp_path, "submitit", executor="submitit-local", seeds=1, variants=("ppo",))
+    assert reproduce.reproduce(args) == 0
     results = tmp_path / "submitit" / "results"
-    assert (results / "episodes.csv").read_text() == (local_results / "episodes.csv").read_text()
+    submitted, local = read_csv(results / "episodes.csv"), read_csv(local_results / "episodes.csv")
+    assert len(submitted) == 2 * 2 * 3  # checkpoints × γ × episodes
+    assert submitted == [row for row in local if row["run"] == "CartPole-v1__ppo__s1"]
     assert (results / "table_discrete.md").exists()
 
 
@@ -121,7 +128,7 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
     """Fault injection: SIGKILL to the launcher alone while a run is between checkpoints. Its training
     child dies with it; the rerun resumes that run from its last checkpoint (bit for bit) and skips the
     finished ones, and the final CSVs equal those of a grid that was never interrupted."""
-    grid = ["--total-timesteps", "16384", "--checkpoint-interval", "2048", "--seeds", "1", "--variants", "ppo",
+    grid = ["--total-timesteps", "8192", "--checkpoint-interval", "2048", "--seeds", "1", "--variants", "ppo",
             "pgg_g1.1", "--gammas", "1", "2", "--episodes", "3", "--workers", "1"]  # fmt: skip
 
     def command(name: str) -> list[str]:
@@ -141,7 +148,7 @@ def test_launcher_killed_mid_grid_leaves_no_orphan_and_its_rerun_equals_an_unint
         time.sleep(0.02)
     launcher.kill()
     launcher.wait()
-    assert not (root / "CartPole-v1__pgg_g1.1__s1" / "checkpoints" / "step_000016384.pt").exists(), "killed too late"
+    assert not (root / "CartPole-v1__pgg_g1.1__s1" / "checkpoints" / "step_000008192.pt").exists(), "killed too late"
     deadline = time.time() + 10
     while processes_mentioning(str(root)) and time.time() < deadline:
         time.sleep(0.1)
@@ -204,12 +211,12 @@ def test_submitit_local_executor_works_when_launched_as_a_command(tmp_path):
     """The jobs unpickle reproduce.TrainingTask, not __main__'s, and import it from anywhere: the command
     runs from a directory that does not hold reproduce.py."""
     command = [sys.executable, str(ROOT / "reproduce.py"), "--executor", "submitit-local", "--envs", "CartPole-v1",
-               "--seeds", "1", "--variants", "ppo", "--total-timesteps", "2048", "--checkpoint-interval", "1024",
+               "--seeds", "1", "--variants", "ppo", "--total-timesteps", "1024", "--checkpoint-interval", "512",
                "--episodes", "2", "--gammas", "1", "2", "--root", str(tmp_path / "grid"),
                "--results", str(tmp_path / "results")]  # fmt: skip
     done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    assert (tmp_path / "grid" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000002048.pt").exists()
+    assert (tmp_path / "grid" / "CartPole-v1__ppo__s1" / "checkpoints" / "step_000001024.pt").exists()
     assert len((tmp_path / "results" / "episodes.csv").read_text().splitlines()) - 1 == 2 * 2 * 2
     assert (tmp_path / "results" / "table_discrete.md").exists()
 
@@ -234,7 +241,7 @@ def test_preempted_submitit_job_is_requeued_and_resumes_from_its_last_checkpoint
     and the requeued task resumes the run from its last checkpoint to the end."""
     import submitit
 
-    spec = reproduce.RunSpec("CartPole-v1", "ppo", 1, str(tmp_path / "runs"), 32768, 2048)
+    spec = reproduce.RunSpec("CartPole-v1", "ppo", 1, str(tmp_path / "runs"), 16384, 2048)
     executor = submitit.LocalExecutor(folder=tmp_path / "submitit")
     executor.update_parameters(timeout_min=60)  # far from it: a preemption, not a timeout
     with reproduce.importable_by_jobs():
@@ -282,7 +289,6 @@ def test_the_launch_counts_trained_half_done_and_not_started_runs(tmp_path):
     )
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize(
     ("flags", "message"),
     [
@@ -301,14 +307,13 @@ def test_the_launch_counts_trained_half_done_and_not_started_runs(tmp_path):
     ],
 )
 def test_bad_arguments_are_one_line_and_exit_2_before_anything_is_created(tmp_path, flags, message):
-    command = [sys.executable, str(ROOT / "reproduce.py"), *flags, "--root", str(tmp_path / "runs"),
-               "--results", str(tmp_path / "results")]  # fmt: skip
-    done = subprocess.run(command, capture_output=True, text=True, cwd=tmp_path, timeout=120, check=False)
+    done = run_main(reproduce, *flags, "--root", tmp_path / "runs", "--results", tmp_path / "results", cwd=tmp_path)
     assert done.returncode == 2 and len(done.stderr.splitlines()) == 1, done.stderr
     assert done.stderr.startswith(message), done.stderr
     assert sorted(os.listdir(tmp_path)) == []
 
 
+@pytest.mark.slow
 def test_the_results_hold_the_sweeps_record_and_the_tables_refuse_a_cut_copy(local_results, tmp_path):
     """The sweep's written.csv travels with its episodes.csv into the results; plot_results.py checks the
     file against it, so that a copy cut at any line is refused, not tabled as whole."""

@@ -16,7 +16,17 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
-from conftest import ROOT, SCRIPTS, default_sigint, one_line_error, run_script, small_args, train, training_vector_env
+from conftest import (
+    ROOT,
+    SCRIPTS,
+    default_sigint,
+    one_line_error,
+    run_main,
+    run_script,
+    small_args,
+    train,
+    training_vector_env,
+)
 
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
@@ -31,6 +41,11 @@ def checkpoint(run_dir, mark) -> dict:
 
 def run_training(kind: str, *flags, **kwargs):
     return run_script(f"{SCRIPTS[kind].__name__}.py", *flags, **kwargs)
+
+
+def run_here(kind: str, *flags):
+    """run_training without a new Python (conftest.run_main): the argument and run-directory errors."""
+    return run_main(SCRIPTS[kind], *flags)
 
 
 def default_run_name(args, script: Path = ROOT / "ppo_pgg_discrete.py") -> str:
@@ -192,7 +207,7 @@ def test_rerun_with_other_arguments_is_refused_before_touching_the_run(tmp_path)
     args = small_args("discrete", tmp_path, total_timesteps=1024)
     run_dir = train(ppo_pgg_discrete, args)
     before = {path: path.read_bytes() for path in run_dir.rglob("*") if path.is_file() and path.name != ".lock"}
-    proc = run_training(
+    proc = run_here(
         "discrete", "--output-dir", str(tmp_path), "--run-name", run_dir.name, "--total-timesteps", "1024",
         "--checkpoint-interval", "512", "--num-steps", "64", "--guidance", "1.1", "--cond-dropout", "0.1",
         "--learning-rate", "0.002",
@@ -205,7 +220,7 @@ def test_rerun_with_other_arguments_is_refused_before_touching_the_run(tmp_path)
 @pytest.mark.parametrize("flag", [["--learning-rate", "nan"], ["--guidance", "1e39"], ["--checkpoint-interval", "100"],
                                   ["--seed", "-1"], ["--seed", "18446744073709551617"]])  # fmt: skip
 def test_invalid_arguments_are_refused_before_touching_the_disk(flag, tmp_path):
-    line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path / "runs"), *flag))
+    line = one_line_error(run_here("discrete", "--output-dir", str(tmp_path / "runs"), *flag))
     assert flag[0] in line
     assert not (tmp_path / "runs").exists()
 
@@ -227,7 +242,7 @@ def test_a_run_directory_in_use_is_refused(tmp_path):
     run_dir.mkdir()
     lock = lock_directory(run_dir)
     try:
-        line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path), "--run-name", "busy"))
+        line = one_line_error(run_here("discrete", "--output-dir", str(tmp_path), "--run-name", "busy"))
         assert f"{run_dir} is in use by another process (pid {os.getpid()})" in line
     finally:
         lock.close()
@@ -288,6 +303,7 @@ def test_progress_is_a_live_bar_in_a_terminal_and_plain_lines_in_a_log(tmp_path,
     assert "training" in screen and "━" in screen and "4,096/4,096 steps" in screen and "SPS" in screen
 
 
+@pytest.mark.slow
 def test_capture_video_records_the_first_sub_envs_episodes(tmp_path):
     pytest.importorskip("moviepy", reason="--capture-video needs the [video] extra")
     pytest.importorskip("pygame", reason="CartPole renders with pygame (the [video] extra)")
@@ -306,6 +322,7 @@ def test_capture_video_records_the_first_sub_envs_episodes(tmp_path):
     assert sum(1 for _ in iio.imiter(first)) == length + 1  # the reset frame and one per step
 
 
+@pytest.mark.slow
 def test_capture_video_without_a_renderer_is_one_line(tmp_path):
     proc = run_training(
         "continuous", "--env-id", "Hopper-v4", "--capture-video", "--output-dir", str(tmp_path / "runs"),
@@ -396,7 +413,7 @@ def test_a_checkpoint_that_would_not_load_back_stops_the_run_at_the_first_one(tm
     "kind,flags", [("discrete", ["--num-steps", "1"]), ("continuous", ["--num-minibatches", "2048"])]
 )
 def test_minibatches_too_small_to_normalise_advantages_are_refused(kind, flags, tmp_path):
-    line = one_line_error(run_training(kind, "--output-dir", str(tmp_path / "runs"), *flags))
+    line = one_line_error(run_here(kind, "--output-dir", str(tmp_path / "runs"), *flags))
     assert "cannot normalise advantages" in line and "--no-norm-adv" in line
     assert not (tmp_path / "runs").exists()
 
@@ -450,7 +467,7 @@ def test_resuming_a_finished_run_touches_none_of_its_files(tmp_path):
     args = small_args("discrete", tmp_path, total_timesteps=512)
     run_dir = train(ppo_pgg_discrete, args)
     before = {path: path.read_bytes() for path in run_dir.rglob("*") if path.is_file() and path.name != ".lock"}
-    proc = run_training("discrete", "--output-dir", str(tmp_path), "--run-name", run_dir.name, "--total-timesteps", "512",
+    proc = run_here("discrete", "--output-dir", str(tmp_path), "--run-name", run_dir.name, "--total-timesteps", "512",
                         "--checkpoint-interval", "512", "--num-steps", "64", "--guidance", "1.1", "--cond-dropout", "0.1",
                         "--resume", "--torch-threads", "2")  # fmt: skip
     assert proc.returncode == 0 and "nothing to train" in proc.stdout, proc.stderr
@@ -459,21 +476,21 @@ def test_resuming_a_finished_run_touches_none_of_its_files(tmp_path):
 
 @pytest.mark.parametrize("name", ["../escape", "/tmp/absolute", ".", "..", "a/b", "", " ", "run ", "a\nb"])
 def test_a_run_name_is_one_path_component(name, tmp_path):
-    line = one_line_error(run_training("discrete", "--output-dir", str(tmp_path / "runs"), "--run-name", name))
+    line = one_line_error(run_here("discrete", "--output-dir", str(tmp_path / "runs"), "--run-name", name))
     assert "--run-name must be one path component" in line or "--run-name must be printable" in line
     assert not list(tmp_path.iterdir()) and not Path("/tmp/absolute").exists()
 
 
 @pytest.mark.parametrize("env_id,space", [("FrozenLake-v1", "Discrete"), ("Blackjack-v1", "Tuple")])
 def test_a_task_without_a_vector_observation_is_refused_before_touching_the_disk(env_id, space, tmp_path):
-    line = one_line_error(run_training("discrete", "--env-id", env_id, "--output-dir", str(tmp_path / "runs")))
+    line = one_line_error(run_here("discrete", "--env-id", env_id, "--output-dir", str(tmp_path / "runs")))
     assert f"{space} observation space" in line and not (tmp_path / "runs").exists()
 
 
 def test_dropping_every_row_is_refused(tmp_path):
     """At --cond-dropout 1 no row keeps its state: the KL and clip fraction of the kept rows are of none
     (logged as 0.0, so --target-kl could never fire), and the policy never sees a state."""
-    line = one_line_error(run_training("discrete", "--cond-dropout", "1", "--total-timesteps", "512",
+    line = one_line_error(run_here("discrete", "--cond-dropout", "1", "--total-timesteps", "512",
                                        "--output-dir", str(tmp_path / "runs")))  # fmt: skip
     assert line == "error: --cond-dropout must be in [0, 1) (at 1 no row keeps its state), got 1.0"
     assert not (tmp_path / "runs").exists()
@@ -514,6 +531,7 @@ def test_a_refused_resume_sets_nothing_aside(tmp_path):
     assert last.read_bytes() == b"not a checkpoint" and not list(run_dir.rglob("*.unreadable"))
 
 
+@pytest.mark.slow
 def test_resuming_with_capture_video_switched_on_still_ends_on_the_uninterrupted_runs_bits(tmp_path):
     """RecordVideo joins the first sub-env's wrapper chain; the saved wrapper state is matched by kind."""
     pytest.importorskip("moviepy", reason="--capture-video needs the [video] extra")
@@ -555,16 +573,19 @@ def test_compile_flag_trains_through_the_compiled_loss(kind, tmp_path, compiled_
         ("discrete", ["--cond-dropout", "1.5"], "--cond-dropout"),
         ("discrete", ["--checkpoint-interval", "0"], "--checkpoint-interval"),
         ("discrete", ["--output-dir", "/proc/forbidden"], "cannot write the run directory"),
-        ("discrete", ["--compile"], "--compile needs a C++ compiler"),  # run with no compiler on PATH
+        pytest.param("discrete", ["--compile"], "--compile needs a C++ compiler", marks=pytest.mark.slow),  # no CXX
         ("continuous", ["--env-id", "CartPole-v1"], "Discrete action space"),
         ("continuous", ["--env-id", "Nope-v4"], "cannot make environment"),
         ("continuous", ["--guidance", "inf"], "--guidance"),
         ("continuous", ["--cond-dropout", "-0.1"], "--cond-dropout"),
         ("continuous", ["--checkpoint-interval", "-5"], "--checkpoint-interval"),
-        ("continuous", ["--compile"], "--compile needs a C++ compiler"),
+        pytest.param("continuous", ["--compile"], "--compile needs a C++ compiler", marks=pytest.mark.slow),
     ],
 )
 def test_bad_input_exits_with_one_line(kind, flags, message):
+    if flags != ["--compile"]:
+        assert message in one_line_error(run_here(kind, *flags))
+        return
     no_compiler = {key: value for key, value in os.environ.items() if key != "CXX"} | {"PATH": ""}
     assert message in one_line_error(run_training(kind, *flags, env=no_compiler))
 
@@ -626,7 +647,7 @@ def test_an_args_json_that_disagrees_with_the_checkpoints_is_refused(tmp_path):
 
 def test_a_name_built_from_exp_name_is_one_path_component(tmp_path):
     output = tmp_path / "a" / "b" / "runs"
-    line = one_line_error(run_training("discrete", "--exp-name", "x/../../../esc_outside", "--output-dir", str(output)))
+    line = one_line_error(run_here("discrete", "--exp-name", "x/../../../esc_outside", "--output-dir", str(output)))
     assert "the run name built from --env-id and --exp-name must be one path component" in line
     assert not list(tmp_path.iterdir())
 
@@ -710,10 +731,10 @@ TINY = ["--total-timesteps", "512", "--num-envs", "1", "--num-steps", "128", "--
 @pytest.mark.slow
 def test_a_fork_and_each_value_of_its_new_argument_get_a_run_directory_of_their_own(tmp_path):
     script, output = fork(tmp_path / "elsewhere"), tmp_path / "runs"
-    for value in ("0.5", "0.7"):
-        proc = run_fork(script, *TINY, "--my-coef", value, "--output-dir", str(output))
+    for value in ("0.5", "0.7"):  # the fork imported as the sweep imports it, its main run in this process
+        proc = run_main(scripts.load_module(script), *TINY, "--my-coef", value, "--output-dir", str(output))
         assert proc.returncode == 0, proc.stderr[-2000:]
-    original = run_script("ppo_pgg_discrete.py", *TINY, "--output-dir", str(output))
+    original = run_main(ppo_pgg_discrete, *TINY, "--output-dir", str(output))
     assert original.returncode == 0, original.stderr[-2000:]
     assert sorted(p.name for p in output.iterdir()) == [
         "CartPole-v1__ppo_fork__g1__p0__my_coef0.5__s1",  # the script's file stem, as CleanRL's --exp-name

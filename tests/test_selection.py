@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import one_line_error, run_script
+from conftest import one_line_error, run_main, run_script
 from scipy import integrate, stats
 
+from paper_study import heldout_gamma
 from paper_study.selection import INCOMPLETE, SELECTED_BASELINE, TESTED, held_out, summary_by_env
 from pgg_utils.files import InputError, read_csv, write_csv_atomic
 
@@ -41,6 +42,7 @@ def expected_max_of_normals(k: int) -> float:
     return value
 
 
+@pytest.mark.slow
 def test_where_gamma_does_nothing_the_fresh_gain_is_zero_and_the_bias_is_the_expected_max_of_the_noise():
     rng = np.random.default_rng(0)
     steps = range(1000, 121_000, 1000)  # 120 groups
@@ -112,14 +114,15 @@ def test_overlapping_episode_seeds_are_refused_in_one_line(tmp_path):
     selection = write_sweep(tmp_path / "sel.csv", sweep(rng, [1000], 10_000, episodes=5))
     fresh = write_sweep(tmp_path / "fresh.csv", sweep(rng, [1000], 10_003, episodes=5))
     out = str(tmp_path / "out")
-    line = one_line_error(run_script("paper_study/heldout_gamma.py", selection, fresh, "--output", out))
+    line = one_line_error(run_main(heldout_gamma, selection, fresh, "--output", out))  # its main, in this process
     assert line == ("error: 2 episode seeds (10003–10004) of run CartPole-v1__pgg_g1.1__s1 at step 1000 are in both "
                     "sweeps; sweep the fresh episodes with another --eval-seed (e.g. 20000)")  # fmt: skip
-    line = one_line_error(run_script("paper_study/heldout_gamma.py", selection, selection, "--output", out))
+    line = one_line_error(run_main(heldout_gamma, selection, selection, "--output", out))
     assert line.startswith("error: 5 episode seeds (10000–10004)")
     assert not Path(out).exists()
 
 
+@pytest.mark.slow
 def test_groups_the_fresh_sweep_lacks_are_reported_not_dropped(tmp_path):
     rng = np.random.default_rng(5)
 

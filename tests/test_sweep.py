@@ -117,6 +117,7 @@ def cell_texts(output: Path, gamma: float) -> dict[str, str]:
     return {p.name: p.read_text() for p in sorted((output / "cells").glob(f"*__g{gamma:g}__*.csv"))}
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["discrete", "continuous"])
 def test_a_cell_does_not_depend_on_what_else_is_swept(runs, kind, tmp_path, monkeypatch):
     """The same cell, swept alone, beside other γ values (two worker processes), and in a sweep that
@@ -643,6 +644,7 @@ def frame_count(path: Path) -> int:
     return sum(1 for _ in iio.imiter(path))
 
 
+@pytest.mark.slow
 def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     """One video per γ of episode k (its reset seed and noise, as in a sweep cell), each frame of it,
     and a side-by-side video as long as the longest. The recorded episode is the sweep cell's episode k:
@@ -663,6 +665,7 @@ def test_video_records_the_same_episode_at_each_gamma(runs, tmp_path):
     assert not list((tmp_path / "videos").glob(".*tmp*"))
 
 
+@pytest.mark.slow
 def test_video_of_several_checkpoints_is_one_line_of_error(runs, tmp_path):
     proc = subprocess.run(
         [*SCRIPT, str(runs / "discrete"), "--video", str(tmp_path / "v")],
@@ -706,6 +709,7 @@ def test_cached_cells_take_todays_config_label(runs, tmp_path, monkeypatch):
     assert evaluated == [] and read_csv(tmp_path / "out" / "episodes.csv") == fresh
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("table", ["discrete", "continuous"])
 def test_the_shipped_agents_load_and_sweep(table, tmp_path):
     """The agents folder of a table: pickle-free, without resume state, each one a (run, step) of the
