@@ -55,7 +55,7 @@ Returns and faults. An episode's return is the task's own: the one that gymnasiu
 which the script's make_env puts directly on gym.make's env (pgg_utils.tasks.task_env), records at its end,
 whatever make_env adds around it (a reward scale); for a script whose make_env has none, the sum of make_env's
 rewards, the figure its training logged (records_episodes). A checkpoint is skipped, with one line in skipped.csv
-and on stderr, and the sweep goes on, where its task's spaces are not those it was trained on (pgg_utils.spaces),
+and on stderr, and the sweep goes on, where its task's spaces are not those it was trained on (pgg_utils.tasks),
 or where during its episodes the task raises, or returns an observation or a reward holding a NaN or an infinity.
 
 Changing the episodes. Copy this file, and copy into it `evaluate_cell`, the one episode loop of a cell, from

@@ -231,7 +231,7 @@ AGENT_METHODS = {
 
 
 def make_agent(args: dict, shapes: dict) -> Agent:
-    """The agent of a run from its training arguments and the task's shapes (spaces.checkpoint_shapes): the one
+    """The agent of a run from its training arguments and the task's shapes (tasks.checkpoint_shapes): the one
     constructor of training and of checkpoint loading, so an argument added to the network reaches both."""
     bounds = (np.asarray(shapes["action_low"], np.float32), np.asarray(shapes["action_high"], np.float32))
     return Agent(shapes["obs_dim"], shapes["action_dim"], args["obs_clip"], args.get("null_dims"), bounds)  # PGG

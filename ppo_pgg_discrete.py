@@ -191,7 +191,7 @@ AGENT_METHODS = {
 
 
 def make_agent(args: dict, shapes: dict) -> Agent:
-    """The agent of a run from its training arguments and the task's shapes (spaces.checkpoint_shapes): the one
+    """The agent of a run from its training arguments and the task's shapes (tasks.checkpoint_shapes): the one
     constructor of training and of checkpoint loading, so an argument added to the network reaches both."""
     return Agent(shapes["obs_dim"], shapes["n_actions"])
 

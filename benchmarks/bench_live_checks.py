@@ -17,7 +17,7 @@ import torch
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import spaces, tasks
+from pgg_utils import tasks
 from pgg_utils.policy import path_error, probe_observations
 
 ROUNDS = 5
@@ -29,7 +29,7 @@ def bench(module, env_id: str) -> None:
     continuous = module is ppo_pgg_continuous
     wrap = (lambda env: module.training_env(env, args.discount, args.reward_clip)) if continuous else None
     envs = tasks.make_vector_env(module.make_env, env_id, args.num_envs, args.seed, wrap=wrap)
-    shapes = spaces.checkpoint_shapes(module.make_env(env_id)())
+    shapes = tasks.checkpoint_shapes(module.make_env(env_id)())
     agent = module.make_agent(asdict(args), shapes)
     obs_dim = envs.single_observation_space.shape[0]
     optimizer = torch.optim.Adam(agent.parameters(), lr=args.learning_rate, eps=1e-5)

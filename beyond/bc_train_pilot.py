@@ -12,9 +12,8 @@ from pathlib import Path
 import torch
 
 from pgg_utils import bc_null, checkpoints, scripts
-from pgg_utils.episodes import read_episodes, select_mode
+from pgg_utils.episodes import read_episodes, seed_means, select_mode
 from pgg_utils.files import one_line_errors
-from pgg_utils.pooling import seed_means
 
 
 def main() -> None:

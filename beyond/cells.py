@@ -1,5 +1,5 @@
 """The numbers every question of the report starts from: a sweep's sampled episodes (pgg_utils.episodes), their
-per-seed means (pgg_utils.pooling), a variant's cells and their summary over seeds, the γ-response at a task's
+per-seed means (pgg_utils.episodes), a variant's cells and their summary over seeds, the γ-response at a task's
 last step; and `record`, which puts one number into report_values.csv's rows."""
 
 import math
@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pgg_utils import pooling
-from pgg_utils.episodes import read_episodes
-from pgg_utils.pooling import mean_ci95
+from pgg_utils import episodes
+from pgg_utils.episodes import mean_ci95, read_episodes
 
 
 def read_rows(path: Path, null_branch: str = "learned") -> list[dict]:
@@ -18,14 +17,14 @@ def read_rows(path: Path, null_branch: str = "learned") -> list[dict]:
 
 
 def seed_means(rows: list[dict]) -> dict:
-    """{(env, variant, step, γ): {seed: mean return}} (pgg_utils.pooling.seed_means)."""
-    return pooling.seed_means(rows, lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])))
+    """{(env, variant, step, γ): {seed: mean return}} (pgg_utils.episodes.seed_means)."""
+    return episodes.seed_means(rows, lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])))
 
 
 def seed_means_of(rows, key, quantity: str) -> dict:
-    """{key(row): {seed: mean of `quantity` over that seed's rows}}: pgg_utils.pooling.seed_means, which averages a
+    """{key(row): {seed: mean of `quantity` over that seed's rows}}: pgg_utils.episodes.seed_means, which averages a
     row's return, of another column (the final distance to the goal)."""
-    return pooling.seed_means(({**r, "return": r[quantity]} for r in rows), key)
+    return episodes.seed_means(({**r, "return": r[quantity]} for r in rows), key)
 
 
 def cells_of(means: dict, env: str, variant: str) -> dict:

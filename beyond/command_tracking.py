@@ -31,7 +31,7 @@ import torch
 import tyro
 
 from paper_study.cheetah_velocity import HalfCheetahVelocity
-from pgg_utils import evaluation, scripts, spaces
+from pgg_utils import evaluation, scripts, tasks
 from pgg_utils.checkpoints import find_checkpoints
 from pgg_utils.files import InputError, one_line_errors, read_csv, write_csv_atomic
 from pgg_utils.identity import variant_id
@@ -111,7 +111,7 @@ def evaluate_checkpoint(path: Path, args: Args) -> tuple[list[dict], str | None]
     probe = make_env()
     if not isinstance(probe.unwrapped, HalfCheetahVelocity):
         return [], f"{path}: {ckpt['env_id']} is not the command task"
-    if error := spaces.mismatch(spaces.recorded(ckpt), probe.observation_space, probe.action_space):
+    if error := tasks.mismatch(tasks.recorded(ckpt), probe.observation_space, probe.action_space):
         return [], f"{path}: its task changed since training ({error})"
     low, high = probe.unwrapped.command_range
     task_sha1 = ";".join(scripts.task_sources(ckpt["env_id"], probe).values())

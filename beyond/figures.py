@@ -21,7 +21,7 @@ from beyond.text import name
 from paper_study.agreement import step_label
 from paper_study.figures import steps_formatter, variant_colour
 from paper_study.paper import paper_name
-from pgg_utils.pooling import mean_ci95
+from pgg_utils.episodes import mean_ci95
 
 
 def band(ax, xs, per_x_values, variant: str, label: str | None = None, linestyle: str = "-") -> None:

@@ -32,7 +32,7 @@ import tyro
 
 from paper_study.cheetah_velocity import COMMAND_INDEX
 from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV
-from pgg_utils import evaluation, scripts, spaces
+from pgg_utils import evaluation, scripts, tasks
 from pgg_utils.checkpoints import find_checkpoints
 from pgg_utils.files import InputError, one_line_errors, write_csv_atomic
 from pgg_utils.identity import variant_id
@@ -153,7 +153,7 @@ def measure_checkpoint(path: Path, args: Args) -> tuple[dict | None, str | None]
         return None, f"{path}: {ckpt['env_id']} has no condition here (only {', '.join(CONDITIONS)})"
     make_env = scripts.training_module(ckpt)[0].make_env(ckpt["env_id"])
     probe = make_env()
-    error = spaces.mismatch(spaces.recorded(ckpt), probe.observation_space, probe.action_space)
+    error = tasks.mismatch(tasks.recorded(ckpt), probe.observation_space, probe.action_space)
     probe.close()
     if error:
         return None, f"{path}: its task changed since training ({error})"

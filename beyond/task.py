@@ -13,7 +13,7 @@ from beyond.sets import CLONING_VARIANTS
 from beyond.text import fill, pct, seed_list
 from paper_study.agreement import fmt, fmt_p, step_label
 from paper_study.paper import paper_name
-from pgg_utils.pooling import mean_ci95
+from pgg_utils.episodes import mean_ci95
 
 TRAJECTORY = ("γ_train of each checkpoint's own iteration, the first whose step reaches the mark (mean over seeds, "
               "min–max over seeds): where the schedule had taken the guidance.")  # fmt: skip

@@ -10,7 +10,7 @@ import numpy as np
 from beyond.sets import COMMAND_VARIANTS
 from paper_study.agreement import fmt_p, step_label
 from paper_study.paper import paper_name
-from pgg_utils.pooling import mean_ci95
+from pgg_utils.episodes import mean_ci95
 
 
 def pct(x: float, decimals: int = 1) -> str:

@@ -20,8 +20,10 @@ import numpy as np
 
 from paper_study.agreement import other_mujoco, step_label
 from paper_study.paper import PAPER_ENVS, PAPER_GAMMAS, paper_name, series_name, variant_rank, with_series
-from pgg_utils.episodes import RETURN_RANGE  # the possible return of a task: axes never extend past it
-from pgg_utils.pooling import mean_ci95
+from pgg_utils.episodes import (
+    RETURN_RANGE,  # the possible return of a task: axes never extend past it
+    mean_ci95,
+)
 
 MARKERS = "osD^vPX*hp<>"
 # The palette, the same in every figure: one colour per training variant (PPO black, the paper's two PGG

@@ -18,10 +18,10 @@ import numpy as np
 from scipy import stats
 
 from paper_study.stats import correct_family
-from pgg_utils import pooling
+from pgg_utils import episodes
+from pgg_utils.episodes import mean_ci95
 from pgg_utils.files import InputError
 from pgg_utils.identity import configuration
-from pgg_utils.pooling import mean_ci95
 
 BASELINE_GAMMA = 1.0  # no guidance: what a selected γ has to beat
 GROUP_FIELDS = ("env_id", "variant", "config", "train_guidance", "cond_dropout", "step")
@@ -42,10 +42,10 @@ def group_key(row: dict) -> tuple:
 
 
 def by_gamma(rows: list[dict]) -> dict:
-    """pgg_utils.pooling.seed_means by group and γ: {group: {γ: {seed: mean return over that cell's episodes}}} of
+    """pgg_utils.episodes.seed_means by group and γ: {group: {γ: {seed: mean return over that cell's episodes}}} of
     one sweep's rows, which hold one run
     per configuration and seed (pgg_utils.episodes.read_episodes refuses pooled runs)."""
-    cells = pooling.seed_means(rows, lambda row: (group_key(row), float(row["eval_guidance"])))
+    cells = episodes.seed_means(rows, lambda row: (group_key(row), float(row["eval_guidance"])))
     out = defaultdict(dict)
     for (key, gamma), by_seed in cells.items():
         out[key][gamma] = by_seed

@@ -1,6 +1,6 @@
 """The statistics the paper study's reports use, once: Welch's test from summary statistics, effect sizes,
 Holm's correction and the sign test; the power of Welch's test and the gap it detects; a bootstrap over
-seeds of a pooled relative gap. The confidence interval over seeds is the sweep's (pgg_utils.pooling).
+seeds of a pooled relative gap. The confidence interval over seeds is the sweep's (pgg_utils.episodes).
 Numpy and scipy; no torch."""
 
 import functools

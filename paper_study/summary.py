@@ -1,9 +1,9 @@
 """The tables' summary of a sweep's episodes: one row per configuration, checkpoint step, eval γ and
-evaluation mode, with the statistics over seeds of the per-seed mean return (pgg_utils.pooling), the
+evaluation mode, with the statistics over seeds of the per-seed mean return (pgg_utils.episodes), the
 label that tells configurations of one task and variant apart, its table (discrete or continuous) and
 the MuJoCo version and code revision behind it. plot_results.py writes its tables and figures from
 these rows; compare_sweeps, heldout_gamma and the dropout figure's reader use the same. Its rows are read by
-pgg_utils.episodes.read_episodes, the one reader, and its statistics are pgg_utils.pooling.summarise's, the one
+pgg_utils.episodes.read_episodes, the one reader, and its statistics are pgg_utils.episodes.summarise's, the one
 summary over seeds."""
 
 import math
@@ -14,9 +14,9 @@ import numpy as np
 
 from paper_study.agreement import series_id
 from paper_study.paper import action_kind, variant_rank
+from pgg_utils.episodes import summarise as summarise_seeds
 from pgg_utils.files import InputError, read_csv
 from pgg_utils.identity import config_fields, configuration, is_mujoco
-from pgg_utils.pooling import summarise as summarise_seeds
 
 ROOT = Path(__file__).resolve().parent.parent
 KINDS = ("discrete", "continuous")  # the paper's two tables, by action space
@@ -79,7 +79,7 @@ def config_labels(configs: dict) -> dict:
 
 
 def summarise(rows: list[dict], provenance: dict | None = None) -> list[dict]:
-    """The tables' summary of episode rows (pgg_utils.episodes.read_episodes): pgg_utils.pooling.summarise per
+    """The tables' summary of episode rows (pgg_utils.episodes.read_episodes): pgg_utils.episodes.summarise per
     (configuration, step, γ, policy, null branch), each with the configuration's label (`series`), its table
     (`kind`), MuJoCo version and code revision, its seeds' standard deviation, and how many seeds its siblings hold."""
     sources, fields = defaultdict(set), {}

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import gymnasium as gym
 
-from pgg_utils import checkpoints, scripts, spaces
+from pgg_utils import checkpoints, scripts, tasks
 from pgg_utils.evaluation import action_error, first_line
 from pgg_utils.files import InputError, read_csv, write_csv_atomic
 from pgg_utils.identity import run_of
@@ -295,11 +295,11 @@ def task_of(module, sweeper: Path, script: Path, env_id: str) -> Task:
 
 
 def task_error(ckpt: dict, task: Task) -> str | None:
-    """One line where the task's spaces are not those the checkpoint was trained on (spaces.mismatch), or
+    """One line where the task's spaces are not those the checkpoint was trained on (tasks.mismatch), or
     its actions are not ones the sweep can act in (action_error)."""
     if error := action_error(ckpt, task.action_space):
         return error
-    if error := spaces.mismatch(spaces.recorded(ckpt), task.observation_space, task.action_space):
+    if error := tasks.mismatch(tasks.recorded(ckpt), task.observation_space, task.action_space):
         return f"its task {ckpt['env_id']} has changed since training: {error}; not evaluated"
     return None
 

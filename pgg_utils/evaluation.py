@@ -21,7 +21,7 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from pgg_utils import scripts, spaces
+from pgg_utils import scripts, tasks
 from pgg_utils.checkpoints import non_finite, read_checkpoint_file
 from pgg_utils.fast import MIN_FORWARD_ROWS, standard_gumbel
 from pgg_utils.tasks import TASK_EPISODE
@@ -108,10 +108,10 @@ def episode_noise(kind: str, eval_seed: int, episode: int, horizon: int, action_
 
 def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
     """The task's time limit, and the size of one step's action noise: the number of actions of the
-    checkpoint's Discrete space, the size of its Box (spaces.recorded; action_error refuses a Box of
+    checkpoint's Discrete space, the size of its Box (tasks.recorded; action_error refuses a Box of
     more than one dimension)."""
     horizon = env.spec.max_episode_steps  # every swept task has one (evaluation_of)
-    action = spaces.recorded(ckpt)["action"]
+    action = tasks.recorded(ckpt)["action"]
     size = (
         action["n"] if ckpt["action_space"] == "discrete" else int(np.prod(action.get("shape", [ckpt["action_dim"]])))
     )
@@ -121,10 +121,10 @@ def horizon_and_action_size(env, ckpt) -> tuple[int, int]:
 def action_error(ckpt: dict, action_space: gym.Space) -> str | None:
     """One line where the sweep cannot act in the checkpoint's Box action space: one of more than one
     dimension, in training or now (the agent's actions are flat vectors; flatten the action in make_env to
-    train on such a task). A size that changed since training is spaces.mismatch's."""
+    train on such a task). A size that changed since training is tasks.mismatch's."""
     if not isinstance(action_space, gym.spaces.Box) or ckpt["action_space"] != "continuous":
         return None
-    trained = tuple(spaces.recorded(ckpt)["action"].get("shape", ()))
+    trained = tuple(tasks.recorded(ckpt)["action"].get("shape", ()))
     shape = next((s for s in (action_space.shape, trained) if len(s) > 1), None)
     if shape is not None:
         return (f"its task's actions are a Box of shape {shape}; the agent acts with flat vectors of "

@@ -31,6 +31,7 @@ from pgg_utils.cells import (
     write_cell,
 )
 from pgg_utils.checkpoints import find_checkpoints
+from pgg_utils.episodes import cell_of, check_one_run_per_seed, summarise
 from pgg_utils.evaluation import EpisodeFault, GuidedPolicy, evaluate_cell, first_line, read_checkpoint
 from pgg_utils.files import (
     InputError,
@@ -42,7 +43,6 @@ from pgg_utils.files import (
     write_record,
 )
 from pgg_utils.identity import Configuration, configuration, configuration_fields, run_of
-from pgg_utils.pooling import cell_of, check_one_run_per_seed, summarise
 from pgg_utils.processes import how_workers_died, start_pool, stop_pool
 from pgg_utils.progress import Progress, format_duration
 
@@ -143,7 +143,7 @@ GROUP_COLUMNS = SUMMARY_COLUMNS[:9]  # a summary row per (env, variant, config, 
 
 def summary_rows(rows: list[dict], method: str = "t", bootstrap_samples: int = 10_000) -> list[dict]:
     """summary.csv: one row per (env, variant, config, step, γ, policy, null branch), the statistics over seeds of
-    the per-seed mean episodic return (pooling.summarise) rounded to 4 places. A seed must be one run: InputError
+    the per-seed mean episodic return (episodes.summarise) rounded to 4 places. A seed must be one run: InputError
     where two runs (the `run` column) give the same seed of one group, or one run gives the same episode twice."""
     check_one_run_per_seed(rows, configuration, cell_of)
     group_of = lambda row: tuple(configuration(row)[2] if c == "config" else str(row[c]) for c in GROUP_COLUMNS)

@@ -1,12 +1,10 @@
 """The task as the training scripts and the sweep make it, written once: gym.make's env with its own returns recorded
 directly on it (`task_env`, on which each script's `make_env` builds), the episodes a vector step ended
 (`ended_episodes`), the training scripts' vector env (`make_vector_env`), what a vector env must be to train,
-checkpoint, resume and be swept (`vector_env_error`), and the task's shapes a checkpoint records (`trained_task`)."""
+checkpoint, resume and be swept (`vector_env_error`), and the task's shapes a checkpoint records (`trained_task`). A checkpoint's contract with its task is here too: the observation and action spaces it was trained on (`describe`, recorded in every checkpoint as `task_spaces`), compared with those of the env its script's make_env makes (`mismatch`), so a task whose spaces changed since training is named in one line, not evaluated with plausible, wrong numbers."""
 
 import gymnasium as gym
 import numpy as np
-
-from pgg_utils import spaces
 
 # The info key under which task_env reports an episode's return and length. Not RecordEpisodeStatistics' default,
 # "episode", so that a recorder a fork adds above it (CleanRL's make_env has one) neither collides with it nor is
@@ -86,19 +84,95 @@ def vector_env_error(envs, task: gym.Env) -> str | None:
     if not all(records_task_return(env) for env in envs.envs):
         return ("make_vector_env's sub-envs do not report the task's own return: make each with make_env, and "
                 "make_env's env with pgg_utils.tasks.task_env, which records it on gym.make's env")  # fmt: skip
-    if error := spaces.vector_mismatch(task, envs.single_observation_space, envs.single_action_space):
+    if error := vector_mismatch(task, envs.single_observation_space, envs.single_action_space):
         return (f"make_vector_env's sub-envs act in another task than make_env makes ({error}): the checkpoints "
                 "record make_env's, which the sweep evaluates; put the wrapper in make_env")  # fmt: skip
     return None
 
 
 def trained_task(script, env_id: str, envs) -> tuple[dict | None, str | None]:
-    """(the shapes a checkpoint records, spaces.checkpoint_shapes of the env `script.make_env` makes, as the sweep
+    """(the shapes a checkpoint records, checkpoint_shapes of the env `script.make_env` makes, as the sweep
     makes it; None, the one line that refuses training): a vector env that cannot train, checkpoint, resume and be
     swept, or observations the scripts' networks cannot take, is refused before the shapes are read."""
     task = script.make_env(env_id)()
     try:
-        error = vector_env_error(envs, task) or spaces.observation_shape_error(env_id, envs.single_observation_space)
-        return (None, error) if error else (spaces.checkpoint_shapes(task), None)
+        error = vector_env_error(envs, task) or observation_shape_error(env_id, envs.single_observation_space)
+        return (None, error) if error else (checkpoint_shapes(task), None)
     finally:
         task.close()
+
+
+def checkpoint_shapes(task: gym.Env) -> dict:
+    """What a checkpoint records of the spaces of `task`, the env a script's make_env makes: the sizes its
+    make_agent reads (a Box action's own bounds: the training envs' ClipAction has ±inf ones), and `task_spaces`,
+    the contract whatever evaluates the checkpoint compares with its task."""
+    obs_space, action_space = task.observation_space, task.action_space
+    if isinstance(action_space, gym.spaces.Discrete):
+        sizes = {"obs_dim": int(obs_space.shape[0]), "n_actions": int(action_space.n)}
+    else:
+        sizes = {"obs_dim": int(obs_space.shape[0]), "action_dim": int(action_space.shape[0]),
+                 "action_low": action_space.low.tolist(), "action_high": action_space.high.tolist()}  # fmt: skip
+    return {**sizes, "task_spaces": describe(obs_space, action_space)}
+
+
+def describe(observation_space: gym.Space, action_space: gym.Space) -> dict:
+    """The spaces as plain data: the observation's shape; a Discrete action's n and start, a Box action's shape
+    and bounds."""
+    if isinstance(action_space, gym.spaces.Discrete):
+        action = {"type": "Discrete", "n": int(action_space.n), "start": int(action_space.start)}
+    elif isinstance(action_space, gym.spaces.Box):
+        action = {
+            "type": "Box",
+            "shape": list(action_space.shape),
+            "low": np.asarray(action_space.low, np.float64).ravel().tolist(),
+            "high": np.asarray(action_space.high, np.float64).ravel().tolist(),
+        }
+    else:
+        action = {"type": type(action_space).__name__}
+    return {"observation": {"shape": list(observation_space.shape or ())}, "action": action}
+
+
+def recorded(ckpt: dict) -> dict:
+    """The checkpoint's contract, from `task_spaces` or, for an older checkpoint, from the sizes it holds
+    (fields it does not know are left out, so they are not compared)."""
+    if "task_spaces" in ckpt:
+        return ckpt["task_spaces"]
+    action = {"type": "Discrete", "n": ckpt["n_actions"]} if "n_actions" in ckpt else {"type": "Box"}
+    if "action_dim" in ckpt:
+        action["shape"] = [ckpt["action_dim"]]
+    return {"observation": {"shape": [ckpt["obs_dim"]]} if "obs_dim" in ckpt else {}, "action": action}
+
+
+def mismatch(contract: dict, observation_space: gym.Space, action_space: gym.Space) -> str | None:
+    """One line naming how the task's spaces differ from those a checkpoint was trained on, or None."""
+    now = describe(observation_space, action_space)
+    then_obs, then_act = contract.get("observation", {}), contract.get("action", {})
+    if "shape" in then_obs and list(then_obs["shape"]) != now["observation"]["shape"]:
+        return f"observation shape {tuple(then_obs['shape'])} in training, {tuple(now['observation']['shape'])} now"
+    if then_act.get("type") != now["action"]["type"]:
+        return f"action space {then_act.get('type')} in training, {now['action']['type']} now"
+    for field in ("n", "start", "shape", "low", "high"):
+        if field in then_act and list(np.atleast_1d(then_act[field])) != list(np.atleast_1d(now["action"][field])):
+            return f"action {field} {then_act[field]} in training, {now['action'][field]} now"
+    return None
+
+
+def vector_mismatch(task: gym.Env, observation_space: gym.Space, action_space: gym.Space) -> str | None:
+    """One line naming how the single spaces of a training script's vector env differ from those of `task`, the env
+    its make_env makes, or None. Infinite bounds on every dimension are ClipAction's (the continuous script puts it
+    on each sub-env), which clips to the bounds of the env it wraps: only the shape is compared then."""
+    contract = describe(task.observation_space, task.action_space)
+    clipped = isinstance(action_space, gym.spaces.Box) and np.isinf([action_space.low, action_space.high]).all()
+    if clipped:
+        contract["action"] = {key: value for key, value in contract["action"].items() if key not in ("low", "high")}
+    return mismatch(contract, observation_space, action_space)
+
+
+def observation_shape_error(env_id: str, observation_space: gym.Space) -> str | None:
+    """What training says of observations the scripts' networks cannot take (they read a vector, a 1-D Box: a frame
+    stack of vectors is (k, n)), or None."""
+    shape = getattr(observation_space, "shape", None)
+    if shape is not None and len(shape) == 1:
+        return None
+    return (f"{env_id}'s observations have shape {shape} as make_env makes them; this script's networks take a vector "
+            "(a 1-D Box): flatten them in make_env (gymnasium.wrappers.FlattenObservation, after a frame stack)")  # fmt: skip

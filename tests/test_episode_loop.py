@@ -15,7 +15,7 @@ import ppo_pgg_continuous
 import ppo_pgg_discrete
 from beyond import command_tracking, goal_distance
 from paper_study.cheetah_velocity import ENV_ID as COMMAND_ENV_ID
-from pgg_utils import bc_null, evaluation, files, spaces
+from pgg_utils import bc_null, evaluation, files, tasks
 
 
 @pytest.mark.slow
@@ -53,7 +53,7 @@ def command_agent():
     torch.manual_seed(1)
     env = gym.make(COMMAND_ENV_ID)
     ckpt = {"env_id": COMMAND_ENV_ID, "action_space": "continuous", "action_dim": 6,
-            "task_spaces": spaces.describe(env.observation_space, env.action_space)}  # fmt: skip
+            "task_spaces": tasks.describe(env.observation_space, env.action_space)}  # fmt: skip
     bounds = (env.action_space.low, env.action_space.high)
     return ppo_pgg_continuous.Agent(18, 6, null_dims=(17,), action_bounds=bounds), ckpt
 
@@ -64,7 +64,7 @@ def cloning_agent(kind: str):
         return ppo_pgg_discrete.Agent(4, 2), {"env_id": "CartPole-v1", "action_space": "discrete", "n_actions": 2}
     env = gym.make("Hopper-v4")
     ckpt = {"env_id": "Hopper-v4", "action_space": "continuous", "action_dim": 3,
-            "task_spaces": spaces.describe(env.observation_space, env.action_space)}  # fmt: skip
+            "task_spaces": tasks.describe(env.observation_space, env.action_space)}  # fmt: skip
     return ppo_pgg_continuous.Agent(11, 3, action_bounds=(env.action_space.low, env.action_space.high)), ckpt
 
 

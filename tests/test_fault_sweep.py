@@ -21,7 +21,7 @@ from conftest import ROOT, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import cells, checkpoints, evaluation, files, identity, pooling
+from pgg_utils import cells, checkpoints, episodes, evaluation, files, identity
 from pgg_utils import sweep as engine
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures"
@@ -50,7 +50,7 @@ def test_the_sweep_shares_the_packages_classes():
     from paper_study import summary
 
     assert sweep.InputError is engine.InputError is files.InputError
-    assert engine.summarise is summary.summarise_seeds is pooling.summarise
+    assert engine.summarise is summary.summarise_seeds is episodes.summarise
 
 
 # --- damaged cells are evaluated again -----------------------------------------------------------------

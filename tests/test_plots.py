@@ -1087,7 +1087,7 @@ def test_the_paper_study_reads_episodes_without_plot_results(tmp_path):
 
 def test_the_sweep_and_the_tables_share_one_per_seed_mean(tmp_path):
     """The sweep's summary ordered seeds as text ("10" before "2"), the tables as numbers: both now take
-    pooling.seed_means (through pooling.summarise), so one cell's seed_means reads the same in summary.csv and in
+    episodes.seed_means (through episodes.summarise), so one cell's seed_means reads the same in summary.csv and in
     the tables, and the held-out selection's per-seed means are the same numbers."""
     from paper_study import selection
     from pgg_utils import sweep as engine

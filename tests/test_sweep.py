@@ -21,7 +21,7 @@ from conftest import ROOT, default_sigint, train
 import eval_gamma_sweep as sweep
 import ppo_pgg_continuous
 import ppo_pgg_discrete
-from pgg_utils import cells, evaluation, files, identity, pooling
+from pgg_utils import cells, episodes, evaluation, files, identity
 from pgg_utils import sweep as engine
 from pgg_utils.checkpoints import checkpoint_step
 from pgg_utils.files import read_csv
@@ -233,11 +233,11 @@ def test_uniform_null_control_is_temperature_scaling(runs):
 
 def test_ci_against_hand_computed_values():
     # mean 3; s = sqrt(2.5) = 1.58114; t_{0.975,4} = 2.776445; half = 2.776445 * 1.58114 / sqrt(5) = 1.963243
-    mean, half, low, high = pooling.mean_ci95([1, 2, 3, 4, 5])
+    mean, half, low, high = episodes.mean_ci95([1, 2, 3, 4, 5])
     assert mean == 3 and half == pytest.approx(1.963243, abs=1e-6) and low == pytest.approx(3 - 1.963243, abs=1e-6)
-    assert pooling.mean_ci95([500, 500, 500])[1] == 0.0
-    assert math.isnan(pooling.mean_ci95([7.0])[1])
-    mean, half, low, high = pooling.mean_ci95([1, 2, 3, 4, 5], method="bootstrap")
+    assert episodes.mean_ci95([500, 500, 500])[1] == 0.0
+    assert math.isnan(episodes.mean_ci95([7.0])[1])
+    mean, half, low, high = episodes.mean_ci95([1, 2, 3, 4, 5], method="bootstrap")
     assert mean == 3 and 1.8 <= low <= 2.2 and 3.8 <= high <= 4.2 and half == pytest.approx((high - low) / 2)
 
 
@@ -251,7 +251,7 @@ def test_summary_aggregates_per_seed_means():
     (row,) = engine.summary_rows(rows)
     assert row["n_seeds"] == 3 and row["n_episodes"] == 6 and row["mean"] == round(85 / 3, 4)
     assert row["seed_means"] == "15.0000;40.0000;30.0000"
-    assert row["ci95"] == pytest.approx(round(pooling.mean_ci95([15, 40, 30])[1], 4))
+    assert row["ci95"] == pytest.approx(round(episodes.mean_ci95([15, 40, 30])[1], 4))
 
 
 def sweep_args(runs, output, **overrides):
