@@ -22,9 +22,8 @@ from test_plots import SEED_MEANS, episode_rows, one_error_line, run_cli, summar
 import eval_gamma_sweep as sweep
 import plot_results as plots
 import ppo_pgg_discrete
-import reproduce
+from paper_study import agents, figures
 from paper_study import aggregate as aggregation
-from paper_study import figures
 from pgg_utils import cells, checkpoints, runs
 from pgg_utils.arguments import answer_cleanrl_habits
 from pgg_utils.checks import env_error
@@ -403,12 +402,12 @@ def test_usage_gives_the_logged_suites_count_and_the_three_skips_of_a_fresh_clon
     where a fresh clone skips three: rliable is not in [dev], the paper's figures lie in ../shared/paper, and a
     MuJoCo video needs a headless renderer."""
     usage = " ".join((ROOT / "docs" / "usage.md").read_text().split())
-    count, minutes, seconds = re.search(r"(\d+) min (\d+) s for the (\d+) of 2026-12-05", usage).group(3, 1, 2)
-    log = (ROOT / "results" / "run_logs_2026-12-05.txt").read_text()
-    passed, skipped = re.search(
-        rf"^(\d+) passed, (\d+) skipped, .*\(0:{int(minutes):02d}:{seconds}\)$", log, re.MULTILINE
-    ).groups()
-    assert int(count) == int(passed) + int(skipped)
+    found = re.search(r"(\d+) min (\d+) s for the (\d+) of (2026-\d\d-\d\d)", usage)
+    minutes, seconds, count, day = found.groups()
+    log = (ROOT / "results" / f"run_logs_{day}.txt").read_text()
+    counts = re.search(rf"^(?:(\d+) failed, )?(\d+) passed, (\d+) skipped, .*\(0:{int(minutes):02d}:{int(seconds):02d}\)$",
+                       log, re.MULTILINE).groups()  # fmt: skip
+    assert int(count) == sum(int(n or 0) for n in counts)
     assert "rliable" not in (ROOT / "pyproject.toml").read_text().split("dev = [", 1)[1].split("]", 1)[0]
     assert "In a fresh clone three are skipped" in usage
     assert all(word in usage for word in ("`pip install rliable`", "`../shared/paper`", "`apt-get install libosmesa6`"))
@@ -422,8 +421,8 @@ def test_an_agents_export_removes_only_the_agents_an_earlier_export_wrote(tmp_pa
     checkpoints.export_agent(FORMAT_2, stale / FORMAT_2.name)
     shutil.copy(FORMAT_2, stale / "step_000001024.pt")  # the user's training checkpoint, resume state and all
     (stale / "step_000002048.pt").write_bytes(b"the user's")
-    (folder / "README.md").write_text(f"# Trained agents\n\n{reproduce.README_HEADER}\n|---|---|---|---|---|---|\n"
+    (folder / "README.md").write_text(f"# Trained agents\n\n{agents.README_HEADER}\n|---|---|---|---|---|---|\n"
                                       "| cartpole | CartPole-v1 | pgg_g1.1 | 1 | 512 | `python ppo_pgg_discrete.py` |\n")  # fmt: skip
-    reproduce.export_agents([], folder)
+    agents.export_agents([], folder)
     assert sorted(p.name for p in stale.iterdir()) == ["step_000001024.pt", "step_000002048.pt"]
     assert read_manifest(folder) == {}

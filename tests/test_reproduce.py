@@ -11,7 +11,7 @@ from conftest import ROOT, one_line_error, run_main
 
 import reproduce
 from beyond import sets as beyond_sets
-from paper_study import paper
+from paper_study import agents, paper
 from pgg_utils import checkpoints
 from pgg_utils.files import RECORD, InputError, lock_directory, read_csv, sha256_of
 
@@ -83,7 +83,7 @@ def test_a_one_seed_grid_after_a_two_seed_grid_leaves_only_its_own_agents(local_
     folder = tmp_path / "agents"
     shutil.copytree(local_results / "agents", folder)  # the 2-seed grid's export
     (folder / two_seeds[-1].name / "notes.md").write_text("the user's")
-    reproduce.export_agents(one_seed, folder)
+    agents.export_agents(one_seed, folder)
     readme = (folder / "README.md").read_text()
     listed = [line.split(" | ")[0].removeprefix("| ") for line in readme.splitlines()[10:] if line.startswith("| ")]
     assert sorted(listed) == sorted(s.name for s in one_seed) and readme.count("| run | env |") == 1
