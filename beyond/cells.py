@@ -21,12 +21,6 @@ def seed_means(rows: list[dict]) -> dict:
     return episodes.seed_means(rows, lambda r: (r["env_id"], r["variant"], int(r["step"]), float(r["eval_guidance"])))
 
 
-def seed_means_of(rows, key, quantity: str) -> dict:
-    """{key(row): {seed: mean of `quantity` over that seed's rows}}: pgg_utils.episodes.seed_means, which averages a
-    row's return, of another column (the final distance to the goal)."""
-    return episodes.seed_means(({**r, "return": r[quantity]} for r in rows), key)
-
-
 def cells_of(means: dict, env: str, variant: str) -> dict:
     return {(step, gamma): seeds for (e, v, step, gamma), seeds in means.items() if e == env and v == variant}
 

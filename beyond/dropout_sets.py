@@ -5,9 +5,9 @@ from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from beyond.cells import seed_means_of
 from beyond.command import read_tracking
 from beyond.sets import COMMAND_DROPOUT, COMMAND_FOLDER, COMMAND_SET, DROPOUT_FOLDER, GOAL_DROPOUT, GOAL_ENV, GOAL_SET
+from pgg_utils.episodes import seed_means
 from pgg_utils.files import read_csv
 
 LEARNED_NULL = "learned_null.csv"
@@ -46,7 +46,7 @@ def read_goal_into(sets: Sets, path: Path, variants) -> None:
     rows = [r for r in rows if int(r["step"]) == last[r["variant"]]]
     key = lambda r: (r["variant"], float(r["eval_guidance"]))
     episodes = Counter((key(r), int(r["seed"])) for r in rows)
-    for cell, by_seed in seed_means_of(rows, key, "final_distance").items():
+    for cell, by_seed in seed_means(rows, key, value="final_distance").items():
         sets.goal[cell] = {seed: (mean, episodes[(cell, seed)]) for seed, mean in by_seed.items()}
     sets.goal_steps.update(last)
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from beyond.cells import seed_means_of
 from paper_study.stats import holm
+from pgg_utils.episodes import seed_means
 from pgg_utils.files import read_csv
 
 
@@ -18,7 +18,7 @@ def read_goal_distance(folder: Path) -> dict:
     if not path.exists():
         return {}
     key = lambda r: (r["env_id"], r["variant"], float(r["eval_guidance"]))
-    return seed_means_of(read_csv(path), key, "final_distance")
+    return seed_means(read_csv(path), key, value="final_distance")
 
 
 def distance_tests(distance: dict, variants_of: dict) -> list[dict]:
