@@ -3,7 +3,7 @@
     python plot_results.py sweeps/discrete --runs runs/discrete --compare-paper --output results/discrete
 
 Reads the episodes.csv of one or more sweeps (eval_gamma_sweep.py) and, with --runs, the runs'
-TensorBoard events. Every statistic is the one of paper_study.stats.mean_ci95: per training seed the
+TensorBoard events. Every statistic is the one of pgg_utils.episodes.mean_ci95: per training seed the
 mean return over the evaluation episodes, then across seeds the mean and a Student-t 95% confidence
 interval. Tables and figures show the same numbers. The report against the paper and CleanRL is
 paper_study.agreement's; the figures are drawn by paper_study.figures.

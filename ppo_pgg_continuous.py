@@ -224,7 +224,7 @@ AGENT_METHODS = {
     "branches": "guidance_diagnostics",  # PGG
     "null_logstd": "the rollouts",  # PGG
     "unconditional_mean": "the sweep",  # PGG
-    "acting_policy": "pgg_utils/bc_null.py",  # PGG
+    "acting_policy": "act, pgg_utils/bc_null.py",  # PGG
     "act": "the sweep",
     "reset": "the sweep",
 }

@@ -184,7 +184,7 @@ AGENT_METHODS = {
     "policy": "the loss",
     "branches": "guidance_diagnostics",  # PGG
     "unconditional_logits": "the sweep",  # PGG
-    "acting_policy": "pgg_utils/bc_null.py",  # PGG
+    "acting_policy": "act, pgg_utils/bc_null.py",  # PGG
     "act": "the sweep",
     "reset": "the sweep",
 }

@@ -9,21 +9,26 @@ loaded machine; it prints the median and range of the probe's share of an iterat
 per --checkpoint-interval steps, 200k by default)."""
 
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from statistics import median
 
 import numpy as np
 import torch
+import tyro
 
 import ppo_pgg_continuous
 import ppo_pgg_discrete
 from pgg_utils import tasks
 from pgg_utils.policy import path_error, probe_observations
 
-ROUNDS = 5
+
+@dataclass
+class Args:
+    rounds: int = 5
+    """training iterations timed per task, each followed by the checkpoint probe"""
 
 
-def bench(module, env_id: str) -> None:
+def bench(module, env_id: str, rounds: int) -> None:
     torch.set_num_threads(1)
     args = module.Args(env_id=env_id, guidance=1.1)
     continuous = module is ppo_pgg_continuous
@@ -46,7 +51,7 @@ def bench(module, env_id: str) -> None:
     next_obs = agent.obs_norm.observe(raw) if continuous else raw
     next_done = np.zeros(args.num_envs, dtype=np.float32)
     seconds = {"iteration": [], "checkpoint probe": []}
-    for _ in range(ROUNDS):
+    for _ in range(rounds):
         start = time.perf_counter()
         policy = module.FastPolicy(agent, args.guidance)
         next_obs, next_done = module.collect_rollout(policy, envs, next_obs, next_done, buf, lambda *a: None, 0)
@@ -65,6 +70,11 @@ def bench(module, env_id: str) -> None:
     envs.close()
 
 
+def main() -> None:
+    rounds = tyro.cli(Args).rounds
+    bench(ppo_pgg_discrete, "CartPole-v1", rounds)
+    bench(ppo_pgg_continuous, "Hopper-v4", rounds)
+
+
 if __name__ == "__main__":
-    bench(ppo_pgg_discrete, "CartPole-v1")
-    bench(ppo_pgg_continuous, "Hopper-v4")
+    main()

@@ -5,19 +5,29 @@ the mean action of its own episodes (pgg_utils.bc_null.reach, in units of σ), t
     python -m beyond.bc_train_pilot runs/bc_pilot runs/sweeps/bc_pilot/episodes.csv
 """
 
-import sys
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
+import tyro
 
 from pgg_utils import bc_null, checkpoints, scripts
 from pgg_utils.episodes import read_episodes, seed_means, select_mode
 from pgg_utils.files import one_line_errors
 
 
+@dataclass
+class Args:
+    run_root: tyro.conf.Positional[Path]
+    """the folder of the pilot's runs (one run directory each)"""
+    episodes: tyro.conf.Positional[Path]
+    """the sweep's episodes.csv of those runs"""
+
+
 def main() -> None:
-    run_root, episodes = Path(sys.argv[1]), Path(sys.argv[2])
+    args = tyro.cli(Args)
+    run_root, episodes = args.run_root, args.episodes
     torch.set_num_threads(1)
     with one_line_errors():
         rows = select_mode(read_episodes([episodes]), "sample", "learned")

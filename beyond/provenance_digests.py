@@ -14,9 +14,11 @@ training script has the recorded script sha1.
 
 import hashlib
 import subprocess
-import sys
 from collections import defaultdict
+from dataclasses import dataclass
 from pathlib import Path
+
+import tyro
 
 ROOT = Path(__file__).resolve().parents[1]
 from pgg_utils import checkpoints
@@ -56,9 +58,16 @@ def commit_digests(script: str) -> tuple[dict, dict]:
     return digests, scripts
 
 
+@dataclass
+class Args:
+    folders: tyro.conf.Positional[tuple[str, ...]]
+    """the agents folders whose checkpoints to trace (results/beyond/<set>/agents)"""
+
+
 def main() -> None:
+    folders = tyro.cli(Args).folders
     groups = defaultdict(lambda: {"seeds": set(), "commits": set(), "machines": set(), "scripts": set()})
-    for folder in sys.argv[1:]:
+    for folder in folders:
         for path in checkpoints.find_checkpoints([folder]):
             ckpt = checkpoints.read_checkpoint_file(path)
             code = ckpt.get("code", {})

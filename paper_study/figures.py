@@ -1,5 +1,5 @@
 """The figures of plot_results.py, drawn from its summary rows (one row per configuration, step and
-eval γ; plot_results.summarise), in one palette: one colour per training variant, one colour and marker
+eval γ; paper_study.summary.summarise), in one palette: one colour per training variant, one colour and marker
 per eval γ, the y-axis never past a task's possible return. figure_for_variant, gamma_response and
 learning_curves each return a figure; render turns one into PNG and PDF bytes, which plot_results writes.
 No torch; the matplotlib backend is the caller's (plot_results sets Agg)."""
