@@ -209,7 +209,7 @@ class Agent(nn.Module):
         sweep acts: sampled with standard normal `noise` (None: drawn, from a generator seeded by `seed` if given),
         or the mode if `deterministic`, clipped to the task's bounds (pgg_utils.policy.guided_actions)."""
         raw = np.asarray(raw_obs, dtype=np.float64)
-        draw = lambda pi: torch.randn(pi.mode().shape).numpy()  # standard normal, from torch's generator
+        draw = lambda pi: torch.randn(pi.mode().shape).numpy()  # torch's generator, so torch.manual_seed repeats it
         return guided_actions(self, raw, guidance, deterministic, noise, mean_null, draw, seed)  # PGG
 
     def predict(self, raw_obs, state=None, episode_start=None, deterministic: bool = False, guidance=1.0):  # PGG
@@ -293,7 +293,7 @@ def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout,
     obs_buf, dones_buf, actions_buf, logprobs_buf, values_buf, rewards_buf = (
         t.numpy() for t in (buf.obs, buf.dones, buf.actions, buf.logprobs, buf.values, buf.rewards)
     )
-    noise = torch.randn(buf.actions.shape).numpy()  # the whole rollout's, in one draw
+    noise = torch.randn(buf.actions.shape).numpy()  # one draw per rollout: cheaper than one per step
     for step in range(buf.obs.shape[0]):
         obs_buf[step] = next_obs
         dones_buf[step] = next_done
@@ -303,7 +303,7 @@ def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout,
         # Truncation ends the episode without bootstrapping, as in CleanRL's PPO.
         next_done = np.logical_or(terminations, truncations).astype(np.float32)
         rewards_buf[step] = reward
-        if "final_info" in infos:  # a sub-env ended an episode; its last step's info and obs are kept here
+        if "final_info" in infos:  # same-step autoreset: the ended episode's last obs is only here
             # The statistics count the episode's last observation before the next one's first, as
             # CleanRL's NormalizeObservation does (step, then the reset inside it).
             policy.obs_norm.update(np.stack(infos["final_obs"][infos["_final_obs"]]))
@@ -494,7 +494,7 @@ def train(args: Args, run: runs.Run) -> None:
     schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim, action_dim)
 
-    # envs.reset(seed=args.seed), the statistics counting the first observation too; or the checkpoint's state.
+    # A resumed run continues the checkpoint's sub-envs mid-episode; a fresh one resets them, its first observation counted.
     start = run.start_or_resume(resumed, envs, agent.obs_norm.observe, agent, optimizer)
     first_iteration, global_step, next_obs, next_done = start
     schedule.load_state_dict(resumed["resume"].get("guidance") if resumed else None)  # PGG: an adaptive γ_train's

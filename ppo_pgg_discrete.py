@@ -247,7 +247,7 @@ def collect_rollout(policy: FastPolicy, envs, next_obs, next_done, buf: Rollout,
     obs_buf, dones_buf, actions_buf, logprobs_buf, values_buf, rewards_buf = (
         t.numpy() for t in (buf.obs, buf.dones, buf.actions, buf.logprobs, buf.values, buf.rewards)
     )
-    gumbel = gumbel_noise(*buf.obs.shape[:2], policy.n_actions)  # the whole rollout's, in one draw
+    gumbel = gumbel_noise(*buf.obs.shape[:2], policy.n_actions)  # one draw per rollout: cheaper than one per step
     for step in range(buf.obs.shape[0]):
         obs_buf[step] = next_obs
         dones_buf[step] = next_done
@@ -440,7 +440,7 @@ def train(args: Args, run: runs.Run) -> None:
     schedule = GuidanceSchedule(args, num_iterations)  # PGG: γ_train of each iteration, from one owner
     buf = Rollout.empty(args.num_steps, args.num_envs, obs_dim)
 
-    # envs.reset(seed=args.seed); or the checkpoint's state.
+    # A resumed run continues the checkpoint's sub-envs mid-episode; a fresh one resets them.
     first_iteration, global_step, next_obs, next_done = run.start_or_resume(resumed, envs, as_input, agent, optimizer)
     schedule.load_state_dict(resumed["resume"].get("guidance") if resumed else None)  # PGG: an adaptive γ_train's
     marks = run.start_progress(global_step, batch_size, num_iterations)
