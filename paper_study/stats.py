@@ -61,9 +61,9 @@ def holm(p_values: list[float]) -> list[float]:
 def correct_family(rows: list[dict]) -> None:
     """Sets each row's `p_holm` and `significant` ("True", "False", or "n/a" where untested) from Holm's
     correction over these rows' `p`: one family, one correction, in every report."""
-    for row, adjusted in zip(rows, holm([row["p"] for row in rows])):
-        row["p_holm"] = adjusted
-        row["significant"] = "n/a" if math.isnan(adjusted) else str(adjusted < ALPHA)
+    set_holm(rows)
+    for row in rows:
+        row["significant"] = "n/a" if math.isnan(row["p_holm"]) else str(row["p_holm"] < ALPHA)
 
 
 def sign_test(differences) -> tuple[int, int, int, float]:
@@ -251,7 +251,7 @@ def welch_of(ours: list[float], theirs: list[float]) -> dict:
 
 
 def set_holm(tests: list[dict | None]) -> None:
-    """Holm over one family: the tests that were made (None where a side had too few seeds)."""
+    """Each test's `p_holm`, Holm over one family: the tests that were made (None where a side had too few seeds)."""
     made = [t for t in tests if t is not None]
     for test, p_holm in zip(made, holm([t["p"] for t in made])):
         test["p_holm"] = p_holm
