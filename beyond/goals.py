@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from paper_study.stats import holm
+from paper_study.stats import set_holm
 from pgg_utils.episodes import seed_means
 from pgg_utils.files import read_csv
 
@@ -37,6 +37,5 @@ def distance_tests(distance: dict, variants_of: dict) -> list[dict]:
                          "closest_gamma": gammas[closest], "closest": values[closest], "largest_gamma": gammas[-1],
                          "largest": values[-1], "farther": sum(c > 0 for c in changes), "seeds": len(changes),
                          "p": float(stats.ttest_1samp(changes, 0.0).pvalue) if len(changes) > 1 else math.nan})  # fmt: skip
-    for row, p_holm in zip(rows, holm([r["p"] for r in rows])):
-        row["p_holm"] = p_holm
+    set_holm(rows)
     return rows
