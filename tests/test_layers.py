@@ -5,11 +5,12 @@ or inside a function, is seen before anything runs."""
 
 import ast
 import functools
+import importlib
 import os
 from pathlib import Path
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, run_main
 
 TRAINING = ("ppo_pgg_discrete", "ppo_pgg_continuous")
 # Each top-level name of the project, with the layer it belongs to (lower numbers lie lower).
@@ -114,3 +115,20 @@ def test_no_import_circle_between_the_projects_modules():
 
     for name in sorted(graph):
         visit(name)
+
+
+def tools() -> list[str]:
+    """The modules of the packages that run as `python -m package.tool`: those with an entry point."""
+    return sorted(
+        name for name, path in modules().items() if "." in name and '__name__ == "__main__"' in path.read_text()
+    )
+
+
+@pytest.mark.parametrize("name", tools())
+def test_every_tool_run_as_a_module_answers_help_with_its_usage(name):
+    """`python -m <tool> --help` prints the tool's usage and exits 0: a tool that reads sys.argv by hand (its file
+    names taken for --help) or runs at import, with no main(), fails here."""
+    module = importlib.import_module(name)
+    assert callable(getattr(module, "main", None)), f"{name} has no main()"
+    done = run_main(module, "--help")
+    assert done.returncode == 0 and "usage" in done.stdout.lower(), (name, done.stderr[-500:])

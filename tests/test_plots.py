@@ -924,7 +924,7 @@ def test_dropout_figure_reading_recovers_the_papers_ppo_table(tmp_path):
     # The figure's PPO markers are the paper's PPO table at 200k and 1M: the pixel-to-return calibration
     # must give those numbers back, to within 1% of each panel's y range.
     out = tmp_path / "readings.csv"
-    reader.main(reader.Args(figure=PAPER_DROPOUT_FIGURE, csv=out))
+    reader.read_figure(reader.Args(figure=PAPER_DROPOUT_FIGURE, csv=out))
     with open(ROOT / "paper_study" / "data" / "paper_results.csv") as f:
         table = {(p["env_id"], int(p["step"])): float(p["mean"]) for p in csv.DictReader(f) if p["method"] == "ppo"}
     with open(out) as f:

@@ -238,7 +238,8 @@ def open_image(path: Path) -> Image.Image:
         sys.exit(f"error: cannot read {path} as an image: {e}")
 
 
-def main(args: Args) -> None:
+def read_figure(args: Args) -> None:
+    """Everything `args` asks for: the markers' CSV, the figure beside ours, the table against our cells."""
     paper = open_image(args.figure)
     if paper.size != FIGURE_SIZE:
         sys.exit(
@@ -279,5 +280,9 @@ def main(args: Args) -> None:
         print(f"wrote {args.table}")
 
 
+def main() -> None:
+    read_figure(tyro.cli(Args))
+
+
 if __name__ == "__main__":
-    main(tyro.cli(Args))
+    main()
