@@ -27,21 +27,17 @@ for set in discrete continuous discrete_first continuous_first continuous_pusher
 done
 T=results/continuous/episodes.csv
 L="table (338e9f8 class)"
-compare() {  # other set, its label: the set against the table it controls
-    local base=$T base_label=$L
-    [ "$1" = discrete_first ] && base=results/discrete/episodes.csv
-    [ "$1" = continuous_device ] && base_label="MuJoCo 2.3.7 (table)"
-    [ "$1" = continuous_halfcheetah_avx2 ] && base_label="table (338e9f8, first CPU)"
-    python -m paper_study.compare_sweeps "$base" "results/$1/episodes.csv" --labels "$base_label" "$2" \
-        --output "results/$1/compare_table.md"
+compare() {  # base episodes, its label, the set it controls, that set's label
+    python -m paper_study.compare_sweeps "$1" "results/$3/episodes.csv" --labels "$2" "$4" \
+        --output "results/$3/compare_table.md"
 }
-compare discrete_first "ebaab04–98ce1f9"
-compare continuous_first "before 3f7c06b"
-compare continuous_pusher "35e2042"
-compare continuous_device "MuJoCo 3.1.6"
-compare continuous_humanoid_400k "35e2042"
-compare continuous_ip_dropout "cc458a3"
-compare continuous_halfcheetah_avx2 "retrain (e2a6cfc, AVX2)"
+compare results/discrete/episodes.csv "$L" discrete_first "ebaab04–98ce1f9"
+compare $T "$L" continuous_first "before 3f7c06b"
+compare $T "$L" continuous_pusher "35e2042"
+compare $T "MuJoCo 2.3.7 (table)" continuous_device "MuJoCo 3.1.6"
+compare $T "$L" continuous_humanoid_400k "35e2042"
+compare $T "$L" continuous_ip_dropout "cc458a3"
+compare $T "table (338e9f8, first CPU)" continuous_halfcheetah_avx2 "retrain (e2a6cfc, AVX2)"
 heldout results/discrete
 python -m paper_study.heldout_gamma $T results/continuous/heldout_fresh.csv --output results/continuous
 python -m paper_study.results_at_a_glance --output results/at_a_glance.md
